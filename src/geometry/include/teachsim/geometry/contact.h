@@ -18,6 +18,8 @@ namespace teachsim::geometry {
 inline constexpr int kMaxContactPoints = 8;
 // A face axis wins over an edge axis unless the edge axis separates by more than this.
 inline constexpr double kFaceAxisSlack = 1e-5;  // m
+// ... and a face whose normal is within this angle of the separating direction is a face contact.
+inline constexpr double kFaceAngle = 1.0 * 3.14159265358979323846 / 180.0;  // rad
 
 struct ContactPoint {
   Eigen::Vector3d point_a;  // world, on A's surface

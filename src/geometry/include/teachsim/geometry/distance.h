@@ -35,6 +35,7 @@ struct DistanceResult {
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // world, unit, from A toward B
   Feature feature_a, feature_b;
   int iterations = 0;
+  bool exhaustive = false;  // GJK's certificate stayed open and the exhaustive pass decided
 };
 
 // Per-pair state carried between queries (temporal coherence, as I-COLLIDE): the support

@@ -1,0 +1,129 @@
+#include "teachsim/geometry/distance.h"
+
+#include <gtest/gtest.h>
+
+#include "tests/random_poses.h"
+
+namespace teachsim::geometry {
+namespace {
+
+using testing::MakeMotion;
+using testing::MakePoses;
+using testing::PoseSet;
+
+ConvexPolyhedron Box(double x, double y, double z) { return ConvexPolyhedron::Box({x, y, z}).value(); }
+
+struct Stats {
+  double max_over = 0.0;   // reported - oracle, > 0 means over-estimate
+  double max_under = 0.0;  // oracle - reported
+  int count = 0;
+  int exhaustive = 0;  // queries GJK handed to the exhaustive pass
+};
+
+Stats Check(const ConvexPolyhedron& a, const ConvexPolyhedron& b, const std::vector<testing::PosePair>& poses,
+            bool warm) {
+  Stats s;
+  DistanceCache cache;
+  for (const auto& p : poses) {
+    DistanceResult d = Distance(a, p.a, b, p.b, warm ? &cache : nullptr);
+    double oracle = DistanceBruteForce(a, p.a, b, p.b);
+    EXPECT_FALSE(d.intersecting);
+    s.exhaustive += d.exhaustive ? 1 : 0;
+    s.max_over = std::max(s.max_over, d.distance - oracle);
+    s.max_under = std::max(s.max_under, oracle - d.distance);
+    // The witness points lie on the surfaces and are as far apart as the upper bound says.
+    EXPECT_NEAR((d.point_b - d.point_a).norm(), d.upper_bound, 1e-12);
+    EXPECT_LE(d.distance, d.upper_bound + 1e-15);
+    ++s.count;
+  }
+  return s;
+}
+
+// The property: never over-estimate, error <= 1e-9 m against the exhaustive oracle, over
+// >= 10^5 poses including near-parallel (tilt <= 0.5 deg) and exactly parallel faces, gaps 1 um..50 mm.
+TEST(Distance, BoxBoxMatchesOracleOnRandomNearParallelAndParallelPoses) {
+  const ConvexPolyhedron cube = Box(0.045, 0.045, 0.045);
+  const ConvexPolyhedron bar = Box(0.09, 0.045, 0.045);
+  int total = 0;
+  for (PoseSet set : {PoseSet::kRandom, PoseSet::kNearParallel, PoseSet::kParallel}) {
+    for (int pair = 0; pair < 2; ++pair) {
+      const ConvexPolyhedron& b = pair == 0 ? cube : bar;
+      auto poses = MakePoses(cube, b, set, 17000, 1000 + static_cast<int>(set) * 10 + pair);
+      Stats s = Check(cube, b, poses, /*warm=*/false);
+      std::printf("set %d pair %d: %d poses, max over-estimate %.3g m, max under-estimate %.3g m, %d exhaustive\n",
+                  static_cast<int>(set), pair, s.count, s.max_over, s.max_under, s.exhaustive);
+      EXPECT_LE(s.exhaustive, s.count / 1000) << "the fallback must stay rare";
+      EXPECT_LE(s.max_over, 1e-9) << "set " << static_cast<int>(set);
+      EXPECT_LE(s.max_under, 1e-9) << "set " << static_cast<int>(set);
+      total += s.count;
+    }
+  }
+  EXPECT_GE(total, 100000);
+}
+
+TEST(Distance, ConvexConvexMatchesOracle) {
+  std::mt19937_64 rng(7);
+  int total = 0;
+  for (int shape = 0; shape < 40; ++shape) {
+    std::uniform_int_distribution<int> count(8, 40);
+    auto a = ConvexPolyhedron::Hull(testing::RandomConvexPoints(rng, count(rng), 0.03)).value();
+    auto b = ConvexPolyhedron::Hull(testing::RandomConvexPoints(rng, count(rng), 0.03)).value();
+    auto poses = MakePoses(a, b, PoseSet::kRandom, 100, 2000 + shape);
+    Stats s = Check(a, b, poses, false);
+    EXPECT_LE(s.max_over, 1e-9);
+    EXPECT_LE(s.max_under, 1e-9);
+    total += s.count;
+  }
+  EXPECT_EQ(total, 4000);
+}
+
+TEST(Distance, WarmStartGivesTheColdAnswerInFewerIterations) {
+  const ConvexPolyhedron cube = Box(0.045, 0.045, 0.045);
+  const ConvexPolyhedron bar = Box(0.09, 0.045, 0.045);
+  auto motion = MakeMotion(cube, bar, 5000, 11);
+  ASSERT_GT(motion.size(), 4000u);
+  DistanceCache cache;
+  long cold_iterations = 0, warm_iterations = 0;
+  for (const auto& p : motion) {
+    DistanceResult cold = Distance(cube, p.a, bar, p.b);
+    DistanceResult warm = Distance(cube, p.a, bar, p.b, &cache);
+    EXPECT_NEAR(cold.distance, warm.distance, 1e-10);
+    cold_iterations += cold.iterations;
+    warm_iterations += warm.iterations;
+  }
+  EXPECT_LT(warm_iterations, cold_iterations);
+}
+
+TEST(Distance, ReportsClosestFeaturesOfFaceToFaceAndVertexToFace) {
+  const ConvexPolyhedron cube = Box(0.045, 0.045, 0.045);
+  // Parallel faces 1 mm apart: the features on each side include the facing faces or parts of them.
+  DistanceResult d = Distance(cube, Pose3::Identity(), cube, Pose3::Translation({0.01, 0.005, 0.046}));
+  EXPECT_NEAR(d.distance, 1e-3, 1e-12);
+  EXPECT_NEAR(d.normal.z(), 1.0, 1e-12);
+  // A corner pointing down onto the top face: B's feature is a vertex, A's a face.
+  Eigen::Quaterniond corner_down = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d(-1, -1, -1).normalized(),
+                                                                      -Eigen::Vector3d::UnitZ());
+  const double half_diagonal = 0.045 * std::sqrt(3.0) / 2.0;
+  DistanceResult v = Distance(cube, Pose3::Identity(), cube,
+                              Pose3(corner_down, {0.0, 0.0, 0.0225 + half_diagonal + 2e-3}));
+  EXPECT_NEAR(v.distance, 2e-3, 1e-12);
+  EXPECT_EQ(v.feature_b.type, Feature::Type::kVertex);
+  EXPECT_EQ(v.feature_a.type, Feature::Type::kFace);
+  EXPECT_NEAR(v.point_a.z(), 0.0225, 1e-12);
+}
+
+TEST(Distance, FlagsIntersection) {
+  const ConvexPolyhedron cube = Box(0.045, 0.045, 0.045);
+  EXPECT_TRUE(Distance(cube, Pose3::Identity(), cube, Pose3::Translation({0.01, 0.02, 0.03})).intersecting);
+  EXPECT_FALSE(Distance(cube, Pose3::Identity(), cube, Pose3::Translation({0.0, 0.0, 0.0451})).intersecting);
+}
+
+TEST(Distance, SegmentDistanceHandlesParallelAndCrossingSegments) {
+  using V = Eigen::Vector3d;
+  EXPECT_NEAR(SegmentSegmentDistance(V(0, 0, 0), V(1, 0, 0), V(0.5, 1, 0), V(2, 1, 0)), 1.0, 1e-15);
+  EXPECT_NEAR(SegmentSegmentDistance(V(0, 0, 0), V(1, 0, 0), V(0.5, -1, 1), V(0.5, 1, 1)), 1.0, 1e-15);
+  EXPECT_NEAR(SegmentSegmentDistance(V(0, 0, 0), V(1, 0, 0), V(2, 0, 0), V(3, 0, 0)), 1.0, 1e-15);
+}
+
+}  // namespace
+}  // namespace teachsim::geometry
