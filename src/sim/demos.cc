@@ -1,0 +1,78 @@
+#include "teachsim/sim/demos.h"
+
+#include <random>
+
+namespace teachsim::sim {
+
+namespace {
+Status Require(const scene::Scene& scene, std::initializer_list<const char*> names) {
+  for (const char* name : names) {
+    if (scene.FindObject(name) < 0) {
+      return Status::InvalidInput(std::string("the demonstration needs an object named '") + name +
+                                  "' (as in scenes/puzzle.json)");
+    }
+  }
+  return Status::Ok();
+}
+}  // namespace
+
+// The puzzle scene's frame: inside x in [-0.10, 0.10], y in [-0.08, 0.08]; outside x in [-0.12,
+// 0.12], y in [-0.10, 0.10]; walls 60 mm high; the lip over the south-west inside corner.
+Result<DragScript> CorneringScript(const scene::Scene& scene, const CorneringVariation& v) {
+  TEACHSIM_RETURN_IF_ERROR(Require(scene, {"cube", "frame", "table"}));
+  const scene::SceneObject& cube = scene.objects[static_cast<std::size_t>(scene.FindObject("cube"))];
+  DragScript script;
+  script.workpiece = "cube";
+  const double z = cube.world_T_object.translation.z();
+  script.start_pose = geometry::Pose3(Eigen::Quaterniond(Eigen::AngleAxisd(v.start_yaw_rad, Eigen::Vector3d::UnitZ())),
+                                      Eigen::Vector3d(v.start_x_m, v.start_y_m, z));
+  // The corner pose of the cube's centre: 22.5 mm from both inside walls, under the lip.
+  const Eigen::Vector3d corner(-0.1 + 0.0225, -0.08 + 0.0225, z);
+  const Eigen::Vector3d start = script.start_pose->translation;
+  script.keyframes.push_back({0.0, start, std::nullopt});
+  double t = 0.0;
+  if (v.wander) {
+    // Feel the way: first toward the north-east, touch the north wall, then across to the west
+    // wall, and only then into the corner.
+    script.keyframes.push_back({t += 1.5, Eigen::Vector3d(0.05, 0.07, z), std::nullopt});
+    script.keyframes.push_back({t += 1.5, Eigen::Vector3d(-0.02, 0.066, z), std::nullopt});
+    script.keyframes.push_back({t += 1.5, Eigen::Vector3d(-0.085, 0.03, z), std::nullopt});
+  }
+  // Aim 10 mm beyond the corner on the diagonal: the walls and the table do the aligning.
+  script.keyframes.push_back({t += 3.0, corner + Eigen::Vector3d(-0.007, -0.007, 0.0), std::nullopt});
+  script.settle_s = 3.0;
+  return script;
+}
+
+Result<DragScript> AroundCornerScript(const scene::Scene& scene) {
+  TEACHSIM_RETURN_IF_ERROR(Require(scene, {"plate", "frame", "table"}));
+  const scene::SceneObject& plate = scene.objects[static_cast<std::size_t>(scene.FindObject("plate"))];
+  DragScript script;
+  script.workpiece = "plate";
+  script.capture = {{"frame", 0.0, 1e300}, {"table", 0.0, 1e300}};
+  const Eigen::Vector3d start = plate.world_T_object.translation;
+  const double z = start.z();
+  const double half = 0.03;     // the plate's half side
+  const double press = 0.008;   // the dragger runs 8 mm inside the frame: about 0.8 N of contact force
+  script.keyframes = {
+      {0.0, start, std::nullopt},
+      {2.0, Eigen::Vector3d(0.12 + half - press, -0.05, z), std::nullopt},       // to the east wall
+      {5.0, Eigen::Vector3d(0.12 + half - press, -0.16, z), std::nullopt},       // south along it, past the corner
+      {8.0, Eigen::Vector3d(0.08, -0.1 - half + press, z), std::nullopt},        // around the south-east corner
+      {10.0, Eigen::Vector3d(0.0, -0.1 - half + press, z), std::nullopt},        // west along the south wall
+  };
+  script.settle_s = 2.0;
+  return script;
+}
+
+CorneringVariation RandomCornering(std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> x(-0.02, 0.06), y(-0.02, 0.045), sign(-1.0, 1.0);
+  CorneringVariation v;
+  v.start_x_m = x(rng);
+  v.start_y_m = y(rng);
+  v.start_yaw_rad = (sign(rng) < 0 ? -1.0 : 1.0) * 20.0 * 3.14159265358979323846 / 180.0;
+  return v;
+}
+
+}  // namespace teachsim::sim
