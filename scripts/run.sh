@@ -4,4 +4,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 bash scripts/build.sh release
-exec build/src/app/teachsim inspect --scene scenes/puzzle.json "$@"
+# Until the operator site exists (teachsim up), the main job is the demonstrations.
+exec build/src/app/teachsim demo all --out demo-out "$@"

@@ -9,6 +9,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libfcl-dev libccd-dev            # peer in the distance benchmark and tests only
   libmujoco-dev                    # the work site's simulated world; peer in the simulator benchmark
+  libqhull-dev                     # MuJoCo's CMake target names its headers
   libopencv-dev libopencv-contrib-dev
   libnanoflann-dev libflann-dev
   libboost-dev libboost-system-dev

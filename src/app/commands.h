@@ -15,6 +15,8 @@ using Runner = std::function<int()>;
 
 void AddBenchCommand(CLI::App& app, Runner* run);
 void AddSceneCommand(CLI::App& app, Runner* run);
+void AddSimulateCommand(CLI::App& app, Runner* run);
+void AddDemoCommand(CLI::App& app, Runner* run);
 
 // Prints "teachsim: error: MESSAGE" to stderr and returns the status's exit code.
 int ReportError(const Status& status);

@@ -31,6 +31,8 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", TEACHSIM_VERSION);
   Runner run;
   AddSceneCommand(app, &run);
+  AddSimulateCommand(app, &run);
+  AddDemoCommand(app, &run);
   AddBenchCommand(app, &run);
   try {
     app.parse(argc, argv);

@@ -49,7 +49,8 @@ Pose3 ReadPose(const json::Reader& reader) {
   if (std::abs(norm - 1.0) > 1e-3) {
     q.Fail("must be a unit quaternion [w, x, y, z], got norm " + json::FormatNumber(norm));
   }
-  rotation.normalize();
+  // Renormalise only what needs it, so that load -> save -> load is bit-identical.
+  if (std::abs(norm - 1.0) > 1e-12) rotation.normalize();
   return {rotation, position};
 }
 

@@ -178,7 +178,12 @@ Result<WorkpiecePath> RunScript(const SimWorld& world, const DragScript& script,
     const Keyframe target = DraggerAt(script, state.time_s);
     geometry::Pose3 dragger_pose(target.orientation.value_or(state.world_T_workpiece.rotation), target.position);
     dragger.SetPose(dragger_pose, target.orientation.has_value());
+    const auto step_start = std::chrono::steady_clock::now();
     StepResult step = Step(*w, state, dragger.Force(state.world_T_workpiece));
+    if (summary != nullptr) {
+      summary->step_us.push_back(
+          std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - step_start).count());
+    }
     path.nodes.push_back(MakeNode(*w, state, CurrentContacts(*w, state)));
     if (progress) progress(state.time_s, end_time);
     // Settled: after the last keyframe, five quiet steps (under 0.1 mm/s and 0.01 rad/s of motion).

@@ -49,6 +49,7 @@ struct RunSummary {
   long sticking_resolved = 0;
   std::vector<PathContact> final_contacts;
   geometry::Pose3 final_pose;
+  std::vector<double> step_us;  // wall time of each Step() call, for the benchmark
 };
 
 // Runs the script in simulated time, as fast as the machine allows. `progress` (optional) is
