@@ -49,7 +49,7 @@ def look_at(eye, target, up=(0, 0, 1)):
     return matrix_to_quat(r)
 
 
-H = 0.06  # frame wall height
+H = 0.03  # frame wall height, as in ../shared/data/vision-dev (a gripper holds a 45 mm block above it)
 # Movable blocks rest 0.25 mm above the table: within the contact distance (0.5 mm), outside the
 # barrier distance (0.1 mm) that the simulator keeps between objects (paper §5.2).
 REST = 0.00025
@@ -58,9 +58,12 @@ frame_parts = [
     {"shape": box([0.24, 0.02, H]), "pose": pose([0.0, 0.09, H / 2])},
     {"shape": box([0.02, 0.16, H]), "pose": pose([-0.11, 0.0, H / 2])},
     {"shape": box([0.02, 0.16, H]), "pose": pose([0.11, 0.0, H / 2])},
-    # The lip: overhangs the inside by 12 mm above the south-west inside corner, 10 mm above the
-    # top of a 45 mm block there, so a block lowered straight into that corner snags on it.
-    {"shape": box([0.012, 0.06, 0.005]), "pose": pose([-0.094, -0.05, H - 0.0025])},
+    # A post raises the west wall by the south-west inside corner to 55 mm, and its lip overhangs
+    # the inside by 12 mm, 5 mm above the top of a 45 mm block in that corner: a block lowered
+    # straight into the corner snags on it (paper Figure 11); one slid in from the open side does
+    # not, and the gripper's fingers (on the block's north and south faces) pass beside it.
+    {"shape": box([0.02, 0.06, 0.025]), "pose": pose([-0.11, -0.05, H + 0.0125])},
+    {"shape": box([0.012, 0.06, 0.005]), "pose": pose([-0.094, -0.05, 0.0525])},
 ]
 objects = [
     {"name": "table", "fixed": True, "shape": box([0.8, 0.6, 0.05]), "pose": pose([0.0, 0.0, -0.025])},

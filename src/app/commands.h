@@ -17,6 +17,8 @@ void AddBenchCommand(CLI::App& app, Runner* run);
 void AddSceneCommand(CLI::App& app, Runner* run);
 void AddSimulateCommand(CLI::App& app, Runner* run);
 void AddDemoCommand(CLI::App& app, Runner* run);
+void AddPlanCommand(CLI::App& app, Runner* run);
+void AddRobotCommand(CLI::App& app, Runner* run);
 
 // Prints "teachsim: error: MESSAGE" to stderr and returns the status's exit code.
 int ReportError(const Status& status);

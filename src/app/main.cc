@@ -33,6 +33,8 @@ int main(int argc, char** argv) {
   AddSceneCommand(app, &run);
   AddSimulateCommand(app, &run);
   AddDemoCommand(app, &run);
+  AddPlanCommand(app, &run);
+  AddRobotCommand(app, &run);
   AddBenchCommand(app, &run);
   try {
     app.parse(argc, argv);

@@ -32,11 +32,13 @@ Result<DragScript> CorneringScript(const scene::Scene& scene, const CorneringVar
   script.keyframes.push_back({0.0, start, std::nullopt});
   double t = 0.0;
   if (v.wander) {
-    // Feel the way: first toward the north-east, touch the north wall, then across to the west
-    // wall, and only then into the corner.
-    script.keyframes.push_back({t += 1.5, Eigen::Vector3d(0.05, 0.07, z), std::nullopt});
-    script.keyframes.push_back({t += 1.5, Eigen::Vector3d(-0.02, 0.066, z), std::nullopt});
+    // Feel the way: over to the east wall, along to the north wall, across to the west wall,
+    // and only then into the corner.
+    script.keyframes.push_back({t += 1.5, Eigen::Vector3d(0.085, 0.0, z), std::nullopt});
+    script.keyframes.push_back({t += 1.5, Eigen::Vector3d(0.07, 0.066, z), std::nullopt});
+    script.keyframes.push_back({t += 2.0, Eigen::Vector3d(-0.02, 0.066, z), std::nullopt});
     script.keyframes.push_back({t += 1.5, Eigen::Vector3d(-0.085, 0.03, z), std::nullopt});
+    script.keyframes.push_back({t += 1.5, Eigen::Vector3d(-0.03, -0.02, z), std::nullopt});  // back into the open
   }
   // Aim 10 mm beyond the corner on the diagonal: the walls and the table do the aligning.
   script.keyframes.push_back({t += 3.0, corner + Eigen::Vector3d(-0.007, -0.007, 0.0), std::nullopt});
@@ -49,7 +51,9 @@ Result<DragScript> AroundCornerScript(const scene::Scene& scene) {
   const scene::SceneObject& plate = scene.objects[static_cast<std::size_t>(scene.FindObject("plate"))];
   DragScript script;
   script.workpiece = "plate";
-  script.capture = {{"frame", 0.0, 1e300}, {"table", 0.0, 1e300}};
+  // Capture on for the stretch along the frame (Figure 12 bottom): from when the plate meets the
+  // east wall to the end; the approach before it is free motion.
+  script.capture = {{"frame", 1.5, 1e300}, {"table", 1.5, 1e300}};
   const Eigen::Vector3d start = plate.world_T_object.translation;
   const double z = start.z();
   const double half = 0.03;     // the plate's half side

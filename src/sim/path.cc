@@ -19,7 +19,9 @@ Json PathToJson(const WorkpiecePath& path) {
       contacts.push_back({{"object", c.object}, {"point", Vec(c.point)}, {"normal", Vec(c.normal)},
                           {"distance", c.distance}, {"capture", c.capture}});
     }
-    nodes.push_back({{"time_s", n.time_s}, {"pose", geometry::WritePose(n.world_T_workpiece)}, {"contacts", contacts}});
+    Json node{{"time_s", n.time_s}, {"pose", geometry::WritePose(n.world_T_workpiece)}, {"contacts", contacts}};
+    if (!n.captured.empty()) node["captured"] = n.captured;
+    nodes.push_back(std::move(node));
   }
   return {{"format", "teachsim.path/1"},
           {"workpiece", path.workpiece},
@@ -45,7 +47,7 @@ Result<WorkpiecePath> ParsePath(const Json& document, const std::string& name) {
     double previous = -1e300;
     for (std::size_t i = 0; i < nodes.Size(); ++i) {
       Reader n = nodes.Index(i);
-      n.RejectUnknownKeys({"time_s", "pose", "contacts"});
+      n.RejectUnknownKeys({"time_s", "pose", "contacts", "captured"});
       PathNode node;
       node.time_s = n.At("time_s").Number();
       if (node.time_s < previous) n.At("time_s").Fail("must not decrease (previous node at " + json::FormatNumber(previous) + ")");
@@ -65,6 +67,9 @@ Result<WorkpiecePath> ParsePath(const Json& document, const std::string& name) {
         pc.distance = c.At("distance").NumberAtLeast(0.0);
         pc.capture = c.At("capture").Bool();
         node.contacts.push_back(std::move(pc));
+      }
+      if (auto captured = n.Find("captured")) {
+        for (std::size_t k = 0; k < captured->Size(); ++k) node.captured.push_back(captured->Index(k).NonEmptyString());
       }
       path.nodes.push_back(std::move(node));
     }

@@ -113,6 +113,8 @@ PathNode MakeNode(const SimWorld& world, const SimState& state, const std::vecto
   for (const Contact& c : contacts) {
     node.contacts.push_back({world.name(c.object), c.point, c.normal, c.distance, c.capture});
   }
+  for (int object : state.engaged) node.captured.push_back(world.name(object));
+  std::sort(node.captured.begin(), node.captured.end());
   return node;
 }
 

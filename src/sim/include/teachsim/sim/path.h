@@ -23,6 +23,7 @@ struct PathNode {
   double time_s = 0.0;
   geometry::Pose3 world_T_workpiece;
   std::vector<PathContact> contacts;
+  std::vector<std::string> captured;  // capture objects engaged at this node (contact kept, maybe > eps_c)
 };
 
 struct WorkpiecePath {

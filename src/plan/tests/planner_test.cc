@@ -1,0 +1,185 @@
+#include "teachsim/plan/planner.h"
+
+#include <gtest/gtest.h>
+
+#include <functional>
+
+#include "teachsim/sim/demos.h"
+
+namespace teachsim::plan {
+namespace {
+
+const std::string kPuzzle = std::string(TEACHSIM_SOURCE_DIR) + "/scenes/puzzle.json";
+
+struct Demo {
+  scene::Scene scene;
+  sim::WorkpiecePath path;
+};
+
+Demo Demonstrate(const std::function<Result<sim::DragScript>(const scene::Scene&)>& make) {
+  Demo d;
+  d.scene = scene::LoadScene(kPuzzle).value();
+  const sim::SimWorld world = sim::SimWorld::Build(d.scene, {}).value();
+  auto script = make(d.scene);
+  EXPECT_TRUE(script.ok());
+  d.path = sim::RunScript(world, *script, {}, nullptr).value();
+  return d;
+}
+
+// Every motion between consecutive poses stays collision-free (conservative advancement, 0 m).
+void ExpectCollisionFree(const sim::SimWorld& world, int workpiece, const sim::WorkpiecePath& path, const char* what) {
+  for (std::size_t i = 1; i < path.nodes.size(); ++i) {
+    EXPECT_TRUE(MotionClear(world, workpiece, path.nodes[i - 1].world_T_workpiece, path.nodes[i].world_T_workpiece, 0.0))
+        << what << " segment " << i;
+  }
+}
+
+void ExpectBiasSolves(const robot::Program& program, double depth) {
+  for (const robot::Command& c : program.commands) {
+    if (const auto* move = std::get_if<robot::ContactMoveCommand>(&c)) {
+      const Eigen::VectorXd residual = -move->normals.transpose() * move->bias_m - Eigen::VectorXd::Constant(move->normals.cols(), depth);
+      EXPECT_LT(residual.norm(), 1e-9);
+    }
+  }
+}
+
+// Figure 12 top: the cornering program approaches from above and from the open side, clear of
+// the lip, in at most six motion commands, and the band stays collision-free and clear of the
+// walls and table where it is free to be.
+TEST(Planner, CorneringApproachesFromAboveAndTheOpenSideInFewMoves) {
+  for (std::uint64_t seed : {0, 4, 9}) {
+    Demo d = Demonstrate([&](const scene::Scene& s) {
+      return sim::CorneringScript(s, seed == 0 ? sim::CorneringVariation{} : sim::RandomCornering(seed));
+    });
+    auto result = GenerateProgram(d.scene, d.path);
+    ASSERT_TRUE(result.ok()) << result.status().message();
+    const PlanMetrics& m = result->metrics;
+    EXPECT_LE(m.motion_commands, 6) << "seed " << seed;
+    EXPECT_TRUE(m.required_contacts_kept);
+    EXPECT_GE(m.min_clearance_after_m, 3e-3) << "seed " << seed;
+    sim::SimOptions band_options;
+    band_options.settle_force_n = 0;
+    const sim::SimWorld world = sim::SimWorld::Build(d.scene, band_options).value();
+    const int cube = d.scene.FindObject("cube");
+    ExpectCollisionFree(world, cube, result->deformed, "deformed");
+    ExpectCollisionFree(world, cube, result->simplified, "simplified");
+    // The final approach: down from above, and from the open (north-east) side of the corner.
+    const auto& knots = result->simplified.nodes;
+    ASSERT_GE(knots.size(), 3u);
+    const Eigen::Vector3d end = knots.back().world_T_workpiece.translation;
+    const Eigen::Vector3d before = knots[knots.size() - 2].world_T_workpiece.translation;
+    EXPECT_GT(before.z(), end.z() + 1e-3) << "seed " << seed;
+    EXPECT_GT((before - end).x() + (before - end).y(), 0.0) << "seed " << seed;
+    // Nothing in the last motion passes under the lip from the west wall's side: the lip spans
+    // x in [-100, -88] mm; the approach starts east of the corner pose.
+    EXPECT_GE(before.x(), end.x() - 1e-4);
+    // The program ends in a contact move into the corner with three normals.
+    const auto* last = std::get_if<robot::ContactMoveCommand>(&result->program.commands[result->program.commands.size() - 3]);
+    ASSERT_NE(last, nullptr);
+    EXPECT_EQ(last->normals.cols(), 3);
+    ExpectBiasSolves(result->program, PlanOptions{}.bias_depth_m);
+  }
+}
+
+TEST(Planner, WanderingDemonstrationLosesAtLeastThirtyPercent) {
+  Demo d = Demonstrate([](const scene::Scene& s) {
+    sim::CorneringVariation v;
+    v.wander = true;
+    return sim::CorneringScript(s, v);
+  });
+  auto result = GenerateProgram(d.scene, d.path);
+  ASSERT_TRUE(result.ok()) << result.status().message();
+  const PlanMetrics& m = result->metrics;
+  std::printf("wandering: %.1f mm -> %.1f mm (%.0f %% shorter)\n", m.length_before_m * 1e3, m.length_after_m * 1e3,
+              100.0 * (1.0 - m.length_after_m / m.length_before_m));
+  EXPECT_LE(m.length_after_m, 0.7 * m.length_before_m);
+  EXPECT_GE(m.min_clearance_after_m, 3e-3);
+}
+
+// Figure 12 bottom: contact with the frame and the table is kept through the captured stretch
+// around the corner; the free approach before it is pushed up, away from the table.
+TEST(Planner, AroundTheCornerKeepsCapturedContactAndLiftsTheApproach) {
+  Demo d = Demonstrate([](const scene::Scene& s) { return sim::AroundCornerScript(s); });
+  auto result = GenerateProgram(d.scene, d.path);
+  ASSERT_TRUE(result.ok()) << result.status().message();
+  EXPECT_TRUE(result->metrics.required_contacts_kept);
+  EXPECT_GT(result->metrics.required_nodes, 20);
+  const sim::SimWorld world = sim::SimWorld::Build(d.scene, {}).value();
+  const int plate = d.scene.FindObject("plate"), frame = d.scene.FindObject("frame"), table = d.scene.FindObject("table");
+  // Every contact move targets a pose within eps_o of the frame and the table.
+  int contact_moves = 0;
+  for (const robot::Command& c : result->program.commands) {
+    if (const auto* move = std::get_if<robot::ContactMoveCommand>(&c)) {
+      const geometry::Pose3 workpiece = move->world_T_tool * result->program.workpiece_T_tool.Inverse();
+      EXPECT_LE(ObjectDistance(world, plate, workpiece, frame), world.options.capture_distance_m);
+      EXPECT_LE(ObjectDistance(world, plate, workpiece, table), world.options.capture_distance_m);
+      ++contact_moves;
+    }
+  }
+  EXPECT_GE(contact_moves, 3);
+  // The approach (before capture) rises well clear of the table.
+  double highest = 0.0;
+  for (const auto& node : result->deformed.nodes) highest = std::max(highest, node.world_T_workpiece.translation.z());
+  EXPECT_GT(highest, d.path.nodes.front().world_T_workpiece.translation.z() + 0.01);
+  ExpectCollisionFree(world, plate, result->simplified, "simplified");
+  ExpectBiasSolves(result->program, PlanOptions{}.bias_depth_m);
+}
+
+TEST(Planner, SamePathGivesAByteIdenticalProgram) {
+  Demo d = Demonstrate([](const scene::Scene& s) { return sim::CorneringScript(s, {}); });
+  auto a = GenerateProgram(d.scene, d.path);
+  auto b = GenerateProgram(d.scene, d.path);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(robot::ProgramToText(a->program), robot::ProgramToText(b->program));
+  EXPECT_EQ(sim::PathToJson(a->deformed).dump(), sim::PathToJson(b->deformed).dump());
+}
+
+// The paper's tight fit: a block dropped into a slot barely wider than itself touches both sides,
+// whose normals oppose; no bias can press into both, and the generator says so.
+TEST(Planner, TightFitIsAClearError) {
+  scene::Scene scene;
+  auto add = [&](const std::string& name, bool fixed, Eigen::Vector3d size, Eigen::Vector3d position) {
+    scene::SceneObject o;
+    o.name = name;
+    o.fixed = fixed;
+    o.shape_spec.box_size = size;
+    o.shape = scene::BuildShape(o.shape_spec).value();
+    o.world_T_object = geometry::Pose3::Translation(position);
+    scene.objects.push_back(o);
+  };
+  add("table", true, {0.4, 0.4, 0.05}, {0, 0, -0.025});
+  add("left", true, {0.02, 0.1, 0.03}, {-0.0225 - 0.0003 - 0.01, 0, 0.015});
+  add("right", true, {0.02, 0.1, 0.03}, {0.0225 + 0.0003 + 0.01, 0, 0.015});
+  add("block", false, {0.045, 0.045, 0.045}, {0, 0, 0.1});
+  sim::WorkpiecePath path;
+  path.workpiece = "block";
+  sim::PathNode start, end;
+  start.world_T_workpiece = geometry::Pose3::Translation({0, 0, 0.1});
+  end.world_T_workpiece = geometry::Pose3::Translation({0, 0, 0.02275});
+  end.time_s = 1.0;
+  end.contacts = {{"table", {0, 0, 0}, {0, 0, 1}, 2.5e-4, false},
+                  {"left", {-0.0228, 0, 0.02}, {1, 0, 0}, 3e-4, false},
+                  {"right", {0.0228, 0, 0.02}, {-1, 0, 0}, 3e-4, false}};
+  path.nodes = {start, end};
+  auto result = GenerateProgram(scene, path);
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.status().code(), StatusCode::kFailed);
+  EXPECT_NE(result.status().message().find("tight fit"), std::string::npos) << result.status().message();
+}
+
+TEST(Planner, BadInputIsNamed) {
+  scene::Scene scene = scene::LoadScene(kPuzzle).value();
+  sim::WorkpiecePath path;
+  path.workpiece = "unicorn";
+  path.nodes.resize(2);
+  EXPECT_EQ(GenerateProgram(scene, path).status().message(), "path: workpiece 'unicorn' is not in the scene");
+  path.workpiece = "table";
+  EXPECT_EQ(GenerateProgram(scene, path).status().message(), "path: workpiece 'table' is a fixed object in the scene");
+  PlanOptions o;
+  o.tension_n = -1;
+  path.workpiece = "cube";
+  EXPECT_EQ(GenerateProgram(scene, path, o).status().message(), "PlanOptions::tension_n = -1 must be > 0");
+}
+
+}  // namespace
+}  // namespace teachsim::plan
