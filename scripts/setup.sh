@@ -13,7 +13,8 @@ packages=(
   libopencv-dev libopencv-contrib-dev
   libnanoflann-dev libflann-dev
   libboost-dev libboost-system-dev
-  libompl-dev liburdfdom-dev
+  libompl-dev liburdfdom-dev        # OMPL: peer in the planner benchmark; links Boost.Serialization
+  libboost-serialization-dev libboost-filesystem-dev
   clang libclang-rt-14-dev         # libFuzzer harnesses
 )
 

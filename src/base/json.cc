@@ -180,6 +180,9 @@ Result<Json> ParseText(std::string_view text, const std::string& name) {
     auto pos = what.find(": syntax error");
     std::string reason = pos == std::string::npos ? what : what.substr(pos + 2);
     return Status::InvalidInput(name + ": " + LineColumn(text, e.byte) + ": " + reason);
+  } catch (const Json::exception& e) {
+    // e.g. out_of_range 406 for a number like 1e999: still bad input, never a crash.
+    return Status::InvalidInput(name + ": " + e.what());
   }
 }
 

@@ -147,3 +147,15 @@ TEST(Json, AtomicWriteReplacesWholeFileAndLeavesNoTemporary) {
 
 }  // namespace
 }  // namespace teachsim::scene
+
+namespace teachsim::scene {
+namespace {
+// nlohmann throws out_of_range, not parse_error, for a number past double's range.
+TEST(Json, HugeNumberIsBadInputNotACrash) {
+  auto parsed = json::ParseText("{\"objects\": [1e999]}", "x.json");
+  ASSERT_FALSE(parsed.ok());
+  EXPECT_EQ(parsed.status().code(), StatusCode::kInvalidInput);
+  EXPECT_EQ(parsed.status().message().rfind("x.json: ", 0), 0u);
+}
+}  // namespace
+}  // namespace teachsim::scene
