@@ -101,6 +101,11 @@ int Run(const BenchArgs& args) {
     return 2;
   }
   auto world = SimWorld::Build(*scene, {}).value();
+  // The paper's line search (golden section over the whole bracket, no end-point test), for the
+  // same scripts in the same run.
+  SimOptions golden_options;
+  golden_options.line_search_golden = true;
+  auto golden_world = SimWorld::Build(*scene, golden_options).value();
   struct Case {
     std::string name;
     std::vector<DragScript> scripts;
@@ -142,6 +147,17 @@ int Run(const BenchArgs& args) {
         queries += summary.queries_per_step * static_cast<double>(summary.steps);
       }
     }
+    std::vector<double> golden_us;
+    long golden_steps = 0;
+    double golden_queries = 0.0;
+    for (const DragScript& s : c.scripts) {
+      RunSummary summary;
+      auto path = RunScript(golden_world, s, {}, &summary);
+      if (!path.ok()) continue;
+      golden_us.insert(golden_us.end(), summary.step_us.begin(), summary.step_us.end());
+      golden_steps += summary.steps;
+      golden_queries += summary.queries_per_step * static_cast<double>(summary.steps);
+    }
     const double median = Percentile(step_us, 0.5);
     out.push_back({{"name", c.name},
                    {"steps", steps},
@@ -151,19 +167,23 @@ int Run(const BenchArgs& args) {
                    {"mujoco_step_us_median", mujoco.median_us},
                    {"mujoco_step_us_p99", mujoco.p99_us},
                    {"ratio_to_mujoco", mujoco.median_us > 0 ? median / mujoco.median_us : 0.0},
-                   {"real_time_factor", median > 0 ? 0.05e6 / median : 0.0}});
+                   {"real_time_factor", median > 0 ? 0.05e6 / median : 0.0},
+                   {"golden_step_us_median", Percentile(golden_us, 0.5)},
+                   {"golden_queries_per_step", golden_steps > 0 ? golden_queries / static_cast<double>(golden_steps) : 0.0}});
   }
   if (args.json) {
     json::Json doc{{"benchmark", "simulate"}, {"step_s", 0.05}, {"cases", out}};
     if (!mujoco.error.empty()) doc["mujoco_error"] = mujoco.error;
     std::printf("%s\n", doc.dump(2).c_str());
   } else {
-    std::printf("%-14s %8s %12s %12s %10s %14s %8s\n", "case", "steps", "median us", "p99 us", "queries", "mujoco us", "ratio");
+    std::printf("%-14s %8s %12s %12s %10s %14s %8s %12s %10s\n", "case", "steps", "median us", "p99 us", "queries",
+                "mujoco us", "ratio", "golden us", "golden q");
     for (const auto& row : out) {
-      std::printf("%-14s %8ld %12.1f %12.1f %10.1f %14.2f %8.2f\n", row["name"].get<std::string>().c_str(),
+      std::printf("%-14s %8ld %12.1f %12.1f %10.1f %14.2f %8.2f %12.1f %10.1f\n", row["name"].get<std::string>().c_str(),
                   row["steps"].get<long>(), row["ours_step_us_median"].get<double>(), row["ours_step_us_p99"].get<double>(),
                   row["queries_per_step"].get<double>(), row["mujoco_step_us_median"].get<double>(),
-                  row["ratio_to_mujoco"].get<double>());
+                  row["ratio_to_mujoco"].get<double>(), row["golden_step_us_median"].get<double>(),
+                  row["golden_queries_per_step"].get<double>());
     }
     if (!mujoco.error.empty()) std::printf("mujoco: %s\n", mujoco.error.c_str());
   }
