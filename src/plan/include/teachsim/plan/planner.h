@@ -26,7 +26,7 @@ struct PlanOptions {
   double tension_n = 0.5;              // constant pull toward each neighbour...
   double min_spacing_m = 2e-3;         // ...proportional below this spacing (the paper's stability fix)
   double rotation_tension_nm = 0.01;   // toward the neighbours' orientations
-  double repulsion_range_m = 0.02;     // unwanted obstacles closer than this push the node away
+  double repulsion_range_m = 0.013;    // unwanted obstacles closer than this push the node away
   double repulsion_n_per_m = 100.0;    // 2 N at contact, more than the tension
   int max_iterations = 200;
   double converged_m = 1e-4;           // a sweep that moves no node farther than this ends it
