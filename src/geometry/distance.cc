@@ -42,108 +42,98 @@ struct Simplex {
 // with its barycentric weights. Degenerate (collinear, flat) cases fall back to their faces. The
 // result is always a convex combination of the simplex's points, hence a point of C: its norm
 // stays an upper bound whatever the rounding, and the certificate in Distance() does the rest.
-void SetSimplex(Simplex& s, std::initializer_list<std::pair<int, double>> keep) {
-  Vertex v[4];
-  double lambda[4];
-  int k = 0;
-  for (auto [index, weight] : keep) {
-    v[k] = s.v[index];
-    lambda[k] = weight;
-    ++k;
+// A sub-simplex (indices into s.v) with barycentric weights and its point: computed without
+// touching the simplex, so the tetrahedron step can compare its faces without copying it.
+struct Candidate {
+  int index[3] = {0, 0, 0};
+  double weight[3] = {1.0, 0.0, 0.0};
+  int n = 1;
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();
+};
+
+void Apply(Simplex& s, const Candidate& c) {
+  Vertex v[3];
+  for (int k = 0; k < c.n; ++k) v[k] = s.v[c.index[k]];
+  for (int k = 0; k < c.n; ++k) {
+    s.v[k] = v[k];
+    s.lambda[k] = c.weight[k];
   }
-  for (int i = 0; i < k; ++i) {
-    s.v[i] = v[i];
-    s.lambda[i] = lambda[i];
-  }
-  s.n = k;
+  s.n = c.n;
 }
 
-Eigen::Vector3d SolveSegment(Simplex& s) {
-  const Eigen::Vector3d a = s.v[0].w;
-  const Eigen::Vector3d ab = s.v[1].w - a;
+Candidate One(const Simplex& s, int i) {
+  Candidate c;
+  c.index[0] = i;
+  c.point = s.v[i].w;
+  return c;
+}
+
+Candidate Two(const Simplex& s, int i, int j, double t) {
+  Candidate c;
+  c.n = 2;
+  c.index[0] = i;
+  c.index[1] = j;
+  c.weight[0] = 1.0 - t;
+  c.weight[1] = t;
+  c.point = s.v[i].w + t * (s.v[j].w - s.v[i].w);
+  return c;
+}
+
+Candidate SegmentCandidate(const Simplex& s, int i, int j) {
+  const Eigen::Vector3d& a = s.v[i].w;
+  const Eigen::Vector3d ab = s.v[j].w - a;
   const double denom = ab.squaredNorm();
   const double t = denom > 0.0 ? -a.dot(ab) / denom : 0.0;
-  if (t <= 0.0) {
-    SetSimplex(s, {{0, 1.0}});
-    return s.v[0].w;
-  }
-  if (t >= 1.0) {
-    SetSimplex(s, {{1, 1.0}});
-    return s.v[0].w;
-  }
-  SetSimplex(s, {{0, 1.0 - t}, {1, t}});
-  return a + t * ab;
+  if (t <= 0.0) return One(s, i);
+  if (t >= 1.0) return One(s, j);
+  return Two(s, i, j, t);
 }
 
 // Triangle s.v[i], s.v[j], s.v[k].
-Eigen::Vector3d SolveTriangle(Simplex& s, int i, int j, int k) {
-  // Copies: SetSimplex() reorders s.v.
-  const Eigen::Vector3d a = s.v[i].w;
-  const Eigen::Vector3d b = s.v[j].w;
-  const Eigen::Vector3d c = s.v[k].w;
+Candidate TriangleCandidate(const Simplex& s, int i, int j, int k) {
+  const Eigen::Vector3d& a = s.v[i].w;
+  const Eigen::Vector3d& b = s.v[j].w;
+  const Eigen::Vector3d& c = s.v[k].w;
   const Eigen::Vector3d ab = b - a, ac = c - a;
   const double d1 = -ab.dot(a), d2 = -ac.dot(a);
-  if (d1 <= 0.0 && d2 <= 0.0) {
-    SetSimplex(s, {{i, 1.0}});
-    return a;
-  }
+  if (d1 <= 0.0 && d2 <= 0.0) return One(s, i);
   const double d3 = -ab.dot(b), d4 = -ac.dot(b);
-  if (d3 >= 0.0 && d4 <= d3) {
-    SetSimplex(s, {{j, 1.0}});
-    return b;
-  }
+  if (d3 >= 0.0 && d4 <= d3) return One(s, j);
   const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
-    const double t = d1 / (d1 - d3);
-    SetSimplex(s, {{i, 1.0 - t}, {j, t}});
-    return a + t * ab;
-  }
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return Two(s, i, j, d1 / (d1 - d3));
   const double d5 = -ab.dot(c), d6 = -ac.dot(c);
-  if (d6 >= 0.0 && d5 <= d6) {
-    SetSimplex(s, {{k, 1.0}});
-    return c;
-  }
+  if (d6 >= 0.0 && d5 <= d6) return One(s, k);
   const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
-    const double t = d2 / (d2 - d6);
-    SetSimplex(s, {{i, 1.0 - t}, {k, t}});
-    return a + t * ac;
-  }
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return Two(s, i, k, d2 / (d2 - d6));
   const double va = d3 * d6 - d5 * d4;
-  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
-    const double t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    SetSimplex(s, {{j, 1.0 - t}, {k, t}});
-    return b + t * (c - b);
-  }
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) return Two(s, j, k, (d4 - d3) / ((d4 - d3) + (d5 - d6)));
   const double sum = va + vb + vc;
   if (!(sum > 0.0)) {
     // Collinear: the best of the three edges.
-    Simplex best = s;
-    double best_norm = std::numeric_limits<double>::infinity();
-    Eigen::Vector3d best_point;
-    for (auto [p, q] : {std::pair{i, j}, std::pair{i, k}, std::pair{j, k}}) {
-      Simplex t = s;
-      SetSimplex(t, {{p, 0.0}, {q, 0.0}});
-      Eigen::Vector3d point = SolveSegment(t);
-      if (point.squaredNorm() < best_norm) {
-        best_norm = point.squaredNorm();
-        best = t;
-        best_point = point;
-      }
+    Candidate best = SegmentCandidate(s, i, j);
+    for (const Candidate& e : {SegmentCandidate(s, i, k), SegmentCandidate(s, j, k)}) {
+      if (e.point.squaredNorm() < best.point.squaredNorm()) best = e;
     }
-    s = best;
-    return best_point;
+    return best;
   }
+  Candidate out;
+  out.n = 3;
+  out.index[0] = i;
+  out.index[1] = j;
+  out.index[2] = k;
   const double v = vb / sum, w = vc / sum;
-  SetSimplex(s, {{i, 1.0 - v - w}, {j, v}, {k, w}});
-  return a + v * ab + w * ac;
+  out.weight[0] = 1.0 - v - w;
+  out.weight[1] = v;
+  out.weight[2] = w;
+  out.point = a + v * ab + w * ac;
+  return out;
 }
 
 // Returns true when the origin lies inside the tetrahedron.
 bool SolveTetrahedron(Simplex& s, Eigen::Vector3d* closest) {
   static constexpr int kFaces[4][4] = {{0, 1, 2, 3}, {0, 2, 3, 1}, {0, 3, 1, 2}, {1, 3, 2, 0}};  // i j k, opposite
+  Candidate best;
   double best_norm = std::numeric_limits<double>::infinity();
-  Simplex best = s;
   bool any_outside = false;
   const double scale = (s.v[1].w - s.v[0].w).squaredNorm() + (s.v[2].w - s.v[0].w).squaredNorm() +
                        (s.v[3].w - s.v[0].w).squaredNorm();
@@ -156,19 +146,18 @@ bool SolveTetrahedron(Simplex& s, Eigen::Vector3d* closest) {
     const bool flat = std::abs(side_other) <= 1e-14 * scale * std::sqrt(scale);
     if (!flat && side_origin * side_other >= 0.0) continue;  // origin on the inner side of this face
     any_outside = true;
-    Simplex t = s;
-    Eigen::Vector3d point = SolveTriangle(t, f[0], f[1], f[2]);
-    if (point.squaredNorm() < best_norm) {
-      best_norm = point.squaredNorm();
-      best = t;
-      *closest = point;
+    const Candidate c = TriangleCandidate(s, f[0], f[1], f[2]);
+    if (const double norm = c.point.squaredNorm(); norm < best_norm) {
+      best_norm = norm;
+      best = c;
     }
   }
   if (!any_outside) {
     closest->setZero();
     return true;
   }
-  s = best;
+  *closest = best.point;
+  Apply(s, best);
   return false;
 }
 
@@ -178,12 +167,18 @@ bool SolveSimplex(Simplex& s, Eigen::Vector3d* closest) {
       s.lambda[0] = 1.0;
       *closest = s.v[0].w;
       return false;
-    case 2:
-      *closest = SolveSegment(s);
+    case 2: {
+      const Candidate c = SegmentCandidate(s, 0, 1);
+      *closest = c.point;
+      Apply(s, c);
       return false;
-    case 3:
-      *closest = SolveTriangle(s, 0, 1, 2);
+    }
+    case 3: {
+      const Candidate c = TriangleCandidate(s, 0, 1, 2);
+      *closest = c.point;
+      Apply(s, c);
       return false;
+    }
     default:
       return SolveTetrahedron(s, closest);
   }
