@@ -18,6 +18,8 @@ void AddSceneCommand(CLI::App& app, Runner* run);
 void AddSimulateCommand(CLI::App& app, Runner* run);
 void AddDemoCommand(CLI::App& app, Runner* run);
 void AddPlanCommand(CLI::App& app, Runner* run);
+void AddRenderCommand(CLI::App& app, Runner* run);
+void AddCalibrateCommand(CLI::App& app, Runner* run);
 void AddRobotCommand(CLI::App& app, Runner* run);
 
 // Prints "teachsim: error: MESSAGE" to stderr and returns the status's exit code.

@@ -34,6 +34,8 @@ int main(int argc, char** argv) {
   AddSimulateCommand(app, &run);
   AddDemoCommand(app, &run);
   AddPlanCommand(app, &run);
+  AddRenderCommand(app, &run);
+  AddCalibrateCommand(app, &run);
   AddRobotCommand(app, &run);
   AddBenchCommand(app, &run);
   try {

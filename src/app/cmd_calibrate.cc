@@ -1,0 +1,132 @@
+// teachsim calibrate: the camera's intrinsics from chessboard images, and its pose from image points
+// of known world position (paper §4.2). Both write a camera entry of the scene format, atomically.
+//
+//   teachsim calibrate intrinsics --images DIR --board COLSxROWS --square METRES --out CAMERA.json [--name
+//   NAME] teachsim calibrate extrinsics --camera CAMERA.json --image IMG.png --points POINTS.json --out
+//   CAMERA.json
+#include <cstdio>
+#include <memory>
+#include <opencv2/imgcodecs.hpp>
+
+#include "commands.h"
+#include "teachsim/scene/scene.h"
+#include "teachsim/vision/calibration.h"
+
+namespace teachsim::app {
+
+namespace {
+
+struct IntrinsicsArgs {
+  std::string images, board, out, name = "camera";
+  double square_m = 0;
+  int min_views = 5;
+  bool fix_tangential = false;
+};
+
+struct ExtrinsicsArgs {
+  std::string camera, image, points, out;
+  double max_rms_px = 2.0;
+};
+
+int RunIntrinsics(const IntrinsicsArgs& a) {
+  auto board = vision::ParseBoardSize(a.board, a.square_m);
+  if (!board.ok()) return ReportError(board.status().WithPrefix("--board/--square"));
+  vision::IntrinsicsOptions options;
+  options.min_views = a.min_views;
+  options.fix_tangential = a.fix_tangential;
+  auto calibration = vision::CalibrateIntrinsicsFromFolder(a.images, *board, options);
+  if (!calibration.ok()) return ReportError(calibration.status());
+  for (const vision::SkippedImage& s : calibration->skipped) {
+    std::fprintf(stderr, "teachsim: warning: skipped %s: %s\n", s.path.c_str(), s.reason.c_str());
+  }
+  const vision::IntrinsicsResult& r = calibration->result;
+  const vision::Camera camera(r.intrinsics, r.distortion, geometry::Pose3::Identity(), r.width, r.height);
+  if (Status s = json::WriteJsonFile(a.out, scene::WriteCamera(camera.ToSpec(a.name))); !s.ok()) {
+    return ReportError(s);
+  }
+  std::printf("%s: %zu views used, %zu skipped; reprojection RMS %.3f px\n", a.out.c_str(),
+              calibration->used.size(), calibration->skipped.size(), r.rms_px);
+  std::printf("  fx %.2f  fy %.2f  cx %.2f  cy %.2f  k1 %.4f  k2 %.4f  p1 %.5f  p2 %.5f  k3 %.4f\n",
+              r.intrinsics.fx, r.intrinsics.fy, r.intrinsics.cx, r.intrinsics.cy, r.distortion.k1,
+              r.distortion.k2, r.distortion.p1, r.distortion.p2, r.distortion.k3);
+  std::printf("  the pose is the identity: run `teachsim calibrate extrinsics` next\n");
+  return 0;
+}
+
+int RunExtrinsics(const ExtrinsicsArgs& a) {
+  auto spec = scene::LoadCamera(a.camera);
+  if (!spec.ok()) return ReportError(spec.status());
+  auto camera = vision::Camera::FromSpec(*spec);
+  if (!camera.ok()) return ReportError(camera.status().WithPrefix(a.camera));
+  // The image the points were picked on: it must exist and match the camera's size.
+  const cv::Mat image = cv::imread(a.image, cv::IMREAD_UNCHANGED);
+  if (image.empty())
+    return ReportError(Status::NotFound(a.image + ": cannot read the image (missing or not an image)"));
+  if (image.cols != camera->width() || image.rows != camera->height()) {
+    return ReportError(Status::InvalidInput(a.image + ": image is " + std::to_string(image.cols) + "x" +
+                                            std::to_string(image.rows) + " but camera " + a.camera + " is " +
+                                            std::to_string(camera->width()) + "x" +
+                                            std::to_string(camera->height())));
+  }
+  auto points = vision::LoadPointCorrespondences(a.points);
+  if (!points.ok()) return ReportError(points.status());
+  for (std::size_t i = 0; i < points->size(); ++i) {
+    if (!camera->InImage((*points)[i].pixel)) {
+      return ReportError(Status::InvalidInput(a.points + ": points[" + std::to_string(i) + "].pixel: (" +
+                                              json::FormatNumber((*points)[i].pixel.x()) + ", " +
+                                              json::FormatNumber((*points)[i].pixel.y()) +
+                                              ") lies outside the " + std::to_string(camera->width()) + "x" +
+                                              std::to_string(camera->height()) + " image"));
+    }
+  }
+  auto result = vision::CalibrateExtrinsics(*camera, *points);
+  if (!result.ok()) return ReportError(result.status().WithPrefix(a.points));
+  const Eigen::Vector3d& p = result->world_T_camera.translation;
+  std::printf("camera at (%.1f, %.1f, %.1f) mm; reprojection RMS %.3f px over %zu points\n", p.x() * 1e3,
+              p.y() * 1e3, p.z() * 1e3, result->rms_px, points->size());
+  for (std::size_t i = 0; i < points->size(); ++i) {
+    std::printf("  %-20s %.3f px\n", (*points)[i].name.c_str(), result->residuals_px[i]);
+  }
+  if (result->rms_px > a.max_rms_px) {
+    return ReportError(Status::Failed(a.points + ": reprojection RMS " + json::FormatNumber(result->rms_px) +
+                                      " px exceeds --max-rms " + json::FormatNumber(a.max_rms_px) +
+                                      " px (a mislabelled or misplaced point?); " + a.out + " not written"));
+  }
+  scene::CameraSpec out = *spec;
+  out.world_T_camera = result->world_T_camera;
+  if (Status s = json::WriteJsonFile(a.out, scene::WriteCamera(out)); !s.ok()) return ReportError(s);
+  std::printf("%s: written\n", a.out.c_str());
+  return 0;
+}
+
+}  // namespace
+
+void AddCalibrateCommand(CLI::App& app, Runner* run) {
+  CLI::App* sub = app.add_subcommand("calibrate", "calibrate the camera: intrinsics, then extrinsics");
+  sub->require_subcommand(1);
+
+  auto in = std::make_shared<IntrinsicsArgs>();
+  CLI::App* intr =
+      sub->add_subcommand("intrinsics", "focal lengths, principal point, distortion from chessboard images");
+  intr->add_option("--images", in->images, "folder of chessboard images")->required();
+  intr->add_option("--board", in->board, "COLSxROWS inner corners, e.g. 9x6")->required();
+  intr->add_option("--square", in->square_m, "square size, m")->required();
+  intr->add_option("--out", in->out, "camera file to write (a scene camera entry)")->required();
+  intr->add_option("--name", in->name, "camera name in the file")->capture_default_str();
+  intr->add_option("--min-views", in->min_views, "fewer usable views is an error")->capture_default_str();
+  intr->add_flag("--zero-tangential", in->fix_tangential, "fix p1 = p2 = 0");
+  intr->callback([in, run] { *run = [in] { return RunIntrinsics(*in); }; });
+
+  auto ex = std::make_shared<ExtrinsicsArgs>();
+  CLI::App* extr =
+      sub->add_subcommand("extrinsics", "the camera's pose from image points of known world position");
+  extr->add_option("--camera", ex->camera, "camera file with the intrinsics")->required();
+  extr->add_option("--image", ex->image, "the image the points were picked on")->required();
+  extr->add_option("--points", ex->points, "POINTS.json: pixel positions with world points")->required();
+  extr->add_option("--out", ex->out, "camera file to write (may be --camera)")->required();
+  extr->add_option("--max-rms", ex->max_rms_px, "fail above this reprojection RMS, px")
+      ->capture_default_str();
+  extr->callback([ex, run] { *run = [ex] { return RunExtrinsics(*ex); }; });
+}
+
+}  // namespace teachsim::app

@@ -1,0 +1,195 @@
+#include "teachsim/vision/camera.h"
+
+#include <cmath>
+#include <string>
+
+namespace teachsim::vision {
+
+namespace {
+bool Finite(double v) { return std::isfinite(v); }
+}  // namespace
+
+Result<Camera> Camera::FromSpec(const scene::CameraSpec& spec) {
+  const std::string where = "camera '" + spec.name + "'";
+  for (double v : {spec.fx, spec.fy, spec.cx, spec.cy, spec.k1, spec.k2, spec.p1, spec.p2, spec.k3}) {
+    if (!Finite(v)) return Status::InvalidInput(where + ": intrinsics and distortion must be finite");
+  }
+  if (spec.fx <= 0 || spec.fy <= 0) {
+    return Status::InvalidInput(where + ": fx and fy must be > 0, got " + json::FormatNumber(spec.fx) + ", " +
+                                json::FormatNumber(spec.fy));
+  }
+  if (spec.width <= 0 || spec.height <= 0) {
+    return Status::InvalidInput(where + ": width and height must be > 0, got " + std::to_string(spec.width) +
+                                "x" + std::to_string(spec.height));
+  }
+  if (!spec.world_T_camera.IsValid()) {
+    return Status::InvalidInput(where + ": pose must be finite with a unit quaternion");
+  }
+  return Camera({spec.fx, spec.fy, spec.cx, spec.cy}, {spec.k1, spec.k2, spec.p1, spec.p2, spec.k3},
+                spec.world_T_camera, spec.width, spec.height);
+}
+
+Camera::Camera(const Intrinsics& intrinsics, const Distortion& distortion,
+               const geometry::Pose3& world_T_camera, int width, int height)
+    : intrinsics_(intrinsics),
+      distortion_(distortion),
+      world_T_camera_(world_T_camera),
+      camera_T_world_(world_T_camera.Inverse()),
+      width_(width),
+      height_(height) {
+  TEACHSIM_CHECK(intrinsics.fx > 0 && intrinsics.fy > 0 && width > 0 && height > 0);
+}
+
+scene::CameraSpec Camera::ToSpec(const std::string& name) const {
+  scene::CameraSpec spec;
+  spec.name = name;
+  spec.width = width_;
+  spec.height = height_;
+  spec.fx = intrinsics_.fx;
+  spec.fy = intrinsics_.fy;
+  spec.cx = intrinsics_.cx;
+  spec.cy = intrinsics_.cy;
+  spec.k1 = distortion_.k1;
+  spec.k2 = distortion_.k2;
+  spec.p1 = distortion_.p1;
+  spec.p2 = distortion_.p2;
+  spec.k3 = distortion_.k3;
+  spec.world_T_camera = world_T_camera_;
+  return spec;
+}
+
+Eigen::Matrix3d Camera::K() const {
+  Eigen::Matrix3d k;
+  k << intrinsics_.fx, 0, intrinsics_.cx, 0, intrinsics_.fy, intrinsics_.cy, 0, 0, 1;
+  return k;
+}
+
+bool Camera::InImage(const Eigen::Vector2d& pixel) const {
+  return pixel.x() >= -0.5 && pixel.y() >= -0.5 && pixel.x() < width_ - 0.5 && pixel.y() < height_ - 0.5;
+}
+
+Eigen::Vector2d Camera::Distort(const Eigen::Vector2d& n) const {
+  const Distortion& d = distortion_;
+  const double x = n.x(), y = n.y();
+  const double r2 = x * x + y * y;
+  const double radial = 1 + r2 * (d.k1 + r2 * (d.k2 + r2 * d.k3));
+  return {x * radial + 2 * d.p1 * x * y + d.p2 * (r2 + 2 * x * x),
+          y * radial + d.p1 * (r2 + 2 * y * y) + 2 * d.p2 * x * y};
+}
+
+Eigen::Matrix2d Camera::DistortJacobian(const Eigen::Vector2d& n) const {
+  const Distortion& d = distortion_;
+  const double x = n.x(), y = n.y();
+  const double r2 = x * x + y * y;
+  const double radial = 1 + r2 * (d.k1 + r2 * (d.k2 + r2 * d.k3));
+  const double dradial_dr2 = d.k1 + r2 * (2 * d.k2 + 3 * r2 * d.k3);
+  // d(r2)/dx = 2x, d(r2)/dy = 2y
+  Eigen::Matrix2d j;
+  j(0, 0) = radial + x * dradial_dr2 * 2 * x + 2 * d.p1 * y + d.p2 * (2 * x + 4 * x);
+  j(0, 1) = x * dradial_dr2 * 2 * y + 2 * d.p1 * x + d.p2 * 2 * y;
+  j(1, 0) = y * dradial_dr2 * 2 * x + d.p1 * 2 * x + 2 * d.p2 * y;
+  j(1, 1) = radial + y * dradial_dr2 * 2 * y + d.p1 * (2 * y + 4 * y) + 2 * d.p2 * x;
+  return j;
+}
+
+std::optional<Eigen::Vector2d> Camera::Undistort(const Eigen::Vector2d& distorted) const {
+  if (distortion_.IsZero()) return distorted;
+  const Distortion& d = distortion_;
+  // OpenCV's fixed-point iteration (cvUndistortPointsInternal) for a start near the right branch.
+  Eigen::Vector2d n = distorted;
+  for (int i = 0; i < 5; ++i) {
+    const double r2 = n.squaredNorm();
+    const double radial = 1 + r2 * (d.k1 + r2 * (d.k2 + r2 * d.k3));
+    if (!(radial > 0)) break;
+    const double dx = 2 * d.p1 * n.x() * n.y() + d.p2 * (r2 + 2 * n.x() * n.x());
+    const double dy = d.p1 * (r2 + 2 * n.y() * n.y()) + 2 * d.p2 * n.x() * n.y();
+    n = Eigen::Vector2d((distorted.x() - dx) / radial, (distorted.y() - dy) / radial);
+  }
+  if (!n.allFinite()) n = distorted;
+  return Undistort(distorted, n);
+}
+
+std::optional<Eigen::Vector2d> Camera::Undistort(const Eigen::Vector2d& distorted,
+                                                 const Eigen::Vector2d& start) const {
+  if (distortion_.IsZero()) return distorted;
+  Eigen::Vector2d n = start.allFinite() ? start : distorted;
+  // Gauss-Newton (a square system: Newton) to full precision.
+  for (int i = 0; i < 30; ++i) {
+    const Eigen::Vector2d residual = Distort(n) - distorted;
+    if (residual.norm() < 1e-14 * (1 + distorted.norm())) break;
+    const Eigen::Matrix2d j = DistortJacobian(n);
+    const double det = j.determinant();
+    if (!(std::abs(det) > 1e-12)) return std::nullopt;
+    n -= j.inverse() * residual;
+    if (!n.allFinite()) return std::nullopt;
+  }
+  // Reject a root beyond the fold of the polynomial (the map is not orientation preserving there)
+  // and a non-converged one.
+  if ((Distort(n) - distorted).norm() > 1e-9 * (1 + distorted.norm())) return std::nullopt;
+  if (DistortJacobian(n).determinant() <= 0) return std::nullopt;
+  return n;
+}
+
+Eigen::Vector2d Camera::NormalizedToPixel(const Eigen::Vector2d& normalized) const {
+  const Eigen::Vector2d dn = Distort(normalized);
+  return {intrinsics_.fx * dn.x() + intrinsics_.cx, intrinsics_.fy * dn.y() + intrinsics_.cy};
+}
+
+std::optional<Eigen::Vector2d> Camera::PixelToNormalized(const Eigen::Vector2d& pixel) const {
+  const Eigen::Vector2d distorted((pixel.x() - intrinsics_.cx) / intrinsics_.fx,
+                                  (pixel.y() - intrinsics_.cy) / intrinsics_.fy);
+  return Undistort(distorted);
+}
+
+std::optional<Eigen::Vector2d> Camera::UndistortPixel(const Eigen::Vector2d& pixel) const {
+  auto n = PixelToNormalized(pixel);
+  if (!n) return std::nullopt;
+  return Eigen::Vector2d(intrinsics_.fx * n->x() + intrinsics_.cx, intrinsics_.fy * n->y() + intrinsics_.cy);
+}
+
+std::optional<Eigen::Vector2d> Camera::ProjectFromCamera(const Eigen::Vector3d& p_in_camera,
+                                                         double min_depth_m) const {
+  if (!(p_in_camera.z() > min_depth_m)) return std::nullopt;
+  return NormalizedToPixel(p_in_camera.head<2>() / p_in_camera.z());
+}
+
+std::optional<Eigen::Vector2d> Camera::Project(const Eigen::Vector3d& p_in_world, double min_depth_m) const {
+  return ProjectFromCamera(camera_T_world_ * p_in_world, min_depth_m);
+}
+
+std::optional<Eigen::Vector3d> Camera::UnprojectToCamera(const Eigen::Vector2d& pixel) const {
+  auto n = PixelToNormalized(pixel);
+  if (!n) return std::nullopt;
+  return Eigen::Vector3d(n->x(), n->y(), 1.0);
+}
+
+std::optional<Ray> Camera::Unproject(const Eigen::Vector2d& pixel) const {
+  auto d = UnprojectToCamera(pixel);
+  if (!d) return std::nullopt;
+  return Ray{world_T_camera_.translation, world_T_camera_.Rotate(d->normalized())};
+}
+
+std::optional<Segment2> Camera::SegmentToNormalized(const Segment2& pixel_segment) const {
+  auto a = PixelToNormalized(pixel_segment.a);
+  auto b = PixelToNormalized(pixel_segment.b);
+  if (!a || !b) return std::nullopt;
+  return Segment2{*a, *b};
+}
+
+std::optional<Eigen::Vector3d> Camera::InterpretationPlaneNormal(const Segment2& pixel_segment) const {
+  auto s = SegmentToNormalized(pixel_segment);
+  if (!s) return std::nullopt;
+  const Eigen::Vector3d n =
+      Eigen::Vector3d(s->a.x(), s->a.y(), 1).cross(Eigen::Vector3d(s->b.x(), s->b.y(), 1));
+  if (n.norm() < 1e-15) return std::nullopt;  // a degenerate segment spans no plane
+  return n.normalized();
+}
+
+Eigen::Vector3d LineThrough(const Eigen::Vector2d& p, const Eigen::Vector2d& q) {
+  const Eigen::Vector2d dir = q - p;
+  TEACHSIM_CHECK_MSG(dir.norm() > 0, "LineThrough needs two distinct points");
+  const Eigen::Vector2d normal = Eigen::Vector2d(-dir.y(), dir.x()).normalized();
+  return {normal.x(), normal.y(), -normal.dot(p)};
+}
+
+}  // namespace teachsim::vision

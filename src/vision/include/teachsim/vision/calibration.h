@@ -1,0 +1,108 @@
+// Camera calibration with OpenCV (paper §4.2): intrinsics off-line from chessboard views (the paper
+// used Tsai's method; Zhang's, in cv::calibrateCamera, is today's equivalent), the camera's pose from
+// work-site features of known position (PnP). Formats: docs/formats/camera.md.
+#pragma once
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "teachsim/base/status.h"
+#include "teachsim/geometry/pose.h"
+#include "teachsim/scene/scene.h"
+#include "teachsim/vision/camera.h"
+
+namespace teachsim::vision {
+
+// A planar chessboard. cols x rows counts the INNER corners (where four squares meet), as OpenCV
+// does: a board of 10 x 7 squares has 9 x 6 inner corners. The board frame has its origin at the
+// first inner corner, x along a row of corners, y along a column, z into the board (away from a
+// camera that sees its printed face), so corner (i, j) sits at (j * square, i * square, 0).
+struct ChessboardSpec {
+  int cols = 9;
+  int rows = 6;
+  double square_m = 0.025;
+  [[nodiscard]] Status Validate() const;
+  std::vector<Eigen::Vector3d> CornersInBoard() const;  // row by row, as OpenCV orders them
+};
+
+// "COLSxROWS" (e.g. "9x6") -> cols, rows; square_m is left at the caller's value.
+[[nodiscard]] Result<ChessboardSpec> ParseBoardSize(const std::string& text, double square_m);
+
+// The inner corners of the board in a monochrome 8-bit image, refined to sub-pixel accuracy
+// (cv::cornerSubPix); nullopt when the whole board is not found.
+std::optional<std::vector<Eigen::Vector2d>> FindChessboardCorners(const cv::Mat& gray,
+                                                                  const ChessboardSpec& board);
+
+struct IntrinsicsOptions {
+  int min_views = 5;            // fewer usable views is an error
+  bool fix_k3 = true;           // k3 is poorly observed at ordinary fields of view
+  bool fix_tangential = false;  // p1 = p2 = 0
+  [[nodiscard]] Status Validate() const;
+};
+
+// The corners found in one image.
+struct CalibrationView {
+  std::string name;  // the image file, for messages
+  std::vector<Eigen::Vector2d> corners;
+};
+
+struct IntrinsicsResult {
+  Intrinsics intrinsics;
+  Distortion distortion;
+  int width = 0, height = 0;
+  double rms_px = 0;                            // reprojection RMS over all corners
+  std::vector<double> view_rms_px;              // per view
+  std::vector<geometry::Pose3> camera_T_board;  // per view
+};
+
+// Zhang's calibration (cv::calibrateCamera) from the corners of >= options.min_views views.
+[[nodiscard]] Result<IntrinsicsResult> CalibrateIntrinsics(const std::vector<CalibrationView>& views,
+                                                           const ChessboardSpec& board, int width, int height,
+                                                           const IntrinsicsOptions& options);
+
+struct SkippedImage {
+  std::string path;
+  std::string reason;  // "cannot read the image", "board not found", ...
+};
+
+struct FolderCalibration {
+  IntrinsicsResult result;
+  std::vector<std::string> used;
+  std::vector<SkippedImage> skipped;
+};
+
+// Every image in `folder` (.png .jpg .jpeg .bmp .tif .tiff, sorted by name): unreadable images,
+// images whose size differs from the first readable one and images without the whole board are
+// named in `skipped`; too few views is an InvalidInput error that lists them.
+[[nodiscard]] Result<FolderCalibration> CalibrateIntrinsicsFromFolder(const std::string& folder,
+                                                                      const ChessboardSpec& board,
+                                                                      const IntrinsicsOptions& options);
+
+// A pixel position paired with the world point it shows (say, a frame corner the operator clicked).
+struct PointCorrespondence {
+  std::string name;
+  Eigen::Vector2d pixel;       // px, as seen in the (distorted) image
+  Eigen::Vector3d p_in_world;  // m
+};
+
+// POINTS.json: {"points": [{"name": "...", "pixel": [u, v], "world": [x, y, z]}, ...]}.
+[[nodiscard]] Result<std::vector<PointCorrespondence>> LoadPointCorrespondences(const std::string& path);
+[[nodiscard]] Result<std::vector<PointCorrespondence>> ParsePointCorrespondences(const json::Json& document,
+                                                                                 const std::string& name);
+json::Json PointCorrespondencesToJson(const std::vector<PointCorrespondence>& points);
+
+struct ExtrinsicsResult {
+  geometry::Pose3 world_T_camera;
+  double rms_px = 0;
+  std::vector<double> residuals_px;  // per point, in input order
+};
+
+// The camera's pose from >= 4 correspondences and the camera's intrinsics and distortion: SQPnP for
+// a global start, then Levenberg-Marquardt refinement of the reprojection error.
+[[nodiscard]] Result<ExtrinsicsResult> CalibrateExtrinsics(const Camera& camera,
+                                                           const std::vector<PointCorrespondence>& points);
+
+}  // namespace teachsim::vision

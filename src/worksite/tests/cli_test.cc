@@ -1,0 +1,173 @@
+// The `render` and `calibrate` commands end to end, and their errors on bad input (exit status 2,
+// a message naming the file and the problem).
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "teachsim/vision/calibration.h"
+
+namespace teachsim::worksite {
+namespace {
+
+struct CommandRun {
+  int status = -1;
+  std::string out, err;
+};
+
+std::string Slurp(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+CommandRun Teachsim(const std::string& args) {
+  const std::string dir = ::testing::TempDir();
+  const std::string command =
+      std::string(TEACHSIM_BINARY) + " " + args + " > " + dir + "/cli_out.txt 2> " + dir + "/cli_err.txt";
+  const int raw = std::system(command.c_str());
+  CommandRun run;
+  run.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+  run.out = Slurp(dir + "/cli_out.txt");
+  run.err = Slurp(dir + "/cli_err.txt");
+  return run;
+}
+
+const std::string kScene = std::string(TEACHSIM_SOURCE_DIR) + "/scenes/puzzle.json";
+
+std::string Folder(const std::string& name) {
+  const std::string dir = ::testing::TempDir() + "/cli_" + name;
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+TEST(CliTest, RenderWritesImageAndTruth) {
+  const std::string dir = Folder("render");
+  const CommandRun run =
+      Teachsim("render --scene " + kScene + " --out " + dir + "/a.png --truth " + dir + "/t.json --seed 5");
+  ASSERT_EQ(run.status, 0) << run.err;
+  EXPECT_TRUE(std::filesystem::exists(dir + "/a.png"));
+  auto truth = json::ReadFile(dir + "/t.json");
+  ASSERT_TRUE(truth.ok());
+  EXPECT_EQ((*truth)["objects"].size(), 7u);
+  EXPECT_EQ((*truth)["camera"]["name"], "main");
+  EXPECT_EQ((*truth)["objects"][2]["name"], "cube");
+  EXPECT_GT((*truth)["objects"][2]["visible_pixels"].get<int>(), 1000);
+  // Same seed, same bytes, through the command line too.
+  ASSERT_EQ(Teachsim("render --scene " + kScene + " --out " + dir + "/b.png --seed 5").status, 0);
+  EXPECT_EQ(Slurp(dir + "/a.png"), Slurp(dir + "/b.png"));
+}
+
+TEST(CliTest, RenderErrorsNameTheFileAndProblem) {
+  const std::string dir = Folder("render_errors");
+  CommandRun run = Teachsim("render --scene " + dir + "/missing.json --out " + dir + "/a.png");
+  EXPECT_EQ(run.status, 2);
+  EXPECT_NE(run.err.find(dir + "/missing.json"), std::string::npos) << run.err;
+  run = Teachsim("render --scene " + kScene + " --camera side --out " + dir + "/a.png");
+  EXPECT_EQ(run.status, 2);
+  EXPECT_NE(run.err.find("no camera named 'side'"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("puzzle.json"), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/a.png"));
+}
+
+TEST(CliTest, CalibrateIntrinsicsFromRenderedViews) {
+  const std::string dir = Folder("intrinsics");
+  CommandRun run = Teachsim("render --chessboard 9x6 --square 0.02 --scene " + kScene + " --views 15 --out " +
+                            dir + "/views");
+  ASSERT_EQ(run.status, 0) << run.err;
+  // An unreadable file and a view without a board among them: named and skipped.
+  std::ofstream(dir + "/views/broken.png") << "not a png";
+  ASSERT_EQ(Teachsim("render --scene " + kScene + " --out " + dir + "/views/scene.png").status, 0);
+  run = Teachsim("calibrate intrinsics --images " + dir + "/views --board 9x6 --square 0.02 --out " + dir +
+                 "/camera.json --name main");
+  ASSERT_EQ(run.status, 0) << run.err;
+  EXPECT_NE(run.err.find("broken.png: cannot read"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("scene.png: chessboard 9x6 (inner corners) not found"), std::string::npos)
+      << run.err;
+  EXPECT_NE(run.out.find("reprojection RMS"), std::string::npos);
+  auto camera = scene::LoadCamera(dir + "/camera.json");
+  ASSERT_TRUE(camera.ok()) << camera.status().message();
+  EXPECT_NEAR(camera->fx / 764.0, 1.0, 0.005);
+  EXPECT_NEAR(camera->cx, 319.5, 2.0);
+  EXPECT_NEAR(camera->k1, -0.24, 0.02);
+
+  // Too few views: an error that lists what was skipped.
+  const std::string few = Folder("intrinsics_few");
+  std::filesystem::copy_file(dir + "/views/scene.png", few + "/scene.png");
+  std::filesystem::copy_file(dir + "/views/view_00.png", few + "/view_00.png");
+  run = Teachsim("calibrate intrinsics --images " + few + " --board 9x6 --square 0.02 --out " + few +
+                 "/c.json");
+  EXPECT_EQ(run.status, 2);
+  EXPECT_NE(run.err.find("1 usable chessboard views of 2 images"), std::string::npos) << run.err;
+  EXPECT_NE(run.err.find("scene.png: chessboard 9x6 (inner corners) not found"), std::string::npos)
+      << run.err;
+  EXPECT_FALSE(std::filesystem::exists(few + "/c.json"));
+  // A missing folder.
+  run = Teachsim("calibrate intrinsics --images " + few + "/nope --board 9x6 --square 0.02 --out " + few +
+                 "/c.json");
+  EXPECT_EQ(run.status, 2);
+  EXPECT_NE(run.err.find(few + "/nope: no such folder"), std::string::npos) << run.err;
+}
+
+TEST(CliTest, CalibrateExtrinsicsFromKnownPoints) {
+  const std::string dir = Folder("extrinsics");
+  auto scene = scene::LoadScene(kScene);
+  ASSERT_TRUE(scene.ok());
+  const scene::CameraSpec truth = scene->cameras[0];
+  auto camera = vision::Camera::FromSpec(truth);
+  ASSERT_TRUE(camera.ok());
+  // The camera's intrinsics with a wrong pose, as `calibrate intrinsics` leaves it.
+  scene::CameraSpec start = truth;
+  start.world_T_camera = geometry::Pose3::Identity();
+  ASSERT_TRUE(json::WriteJsonFile(dir + "/camera.json", scene::WriteCamera(start)).ok());
+  ASSERT_EQ(Teachsim("render --scene " + kScene + " --out " + dir + "/image.png").status, 0);
+  std::vector<vision::PointCorrespondence> points;
+  // The table's far corner and five corners of the frame's walls (which stand on the table).
+  const scene::SceneObject& frame = scene->objects.at(static_cast<std::size_t>(scene->FindObject("frame")));
+  geometry::Aabb walls;
+  for (const geometry::ShapePart& part : frame.shape.parts()) {
+    const geometry::Aabb b = part.convex->WorldBounds(frame.world_T_object * part.shape_T_part);
+    if (std::abs(b.min.z()) < 1e-6) walls.Extend(b);
+  }
+  const Eigen::Vector3d lo = walls.min, hi = walls.max;
+  for (const Eigen::Vector3d& p :
+       {Eigen::Vector3d(-0.4, -0.3, 0), Eigen::Vector3d(lo.x(), lo.y(), hi.z()),
+        Eigen::Vector3d(hi.x(), lo.y(), hi.z()), Eigen::Vector3d(hi.x(), hi.y(), hi.z()),
+        Eigen::Vector3d(lo.x(), hi.y(), hi.z()), Eigen::Vector3d(hi.x(), hi.y(), lo.z())}) {
+    points.push_back({"", (*camera->Project(p)).array().round().matrix(), p});  // clicked at whole pixels
+  }
+  ASSERT_TRUE(json::WriteJsonFile(dir + "/points.json", vision::PointCorrespondencesToJson(points)).ok());
+  CommandRun run = Teachsim("calibrate extrinsics --camera " + dir + "/camera.json --image " + dir +
+                            "/image.png --points " + dir + "/points.json --out " + dir + "/camera.json");
+  ASSERT_EQ(run.status, 0) << run.err;
+  EXPECT_NE(run.out.find("reprojection RMS"), std::string::npos);
+  auto solved = scene::LoadCamera(dir + "/camera.json");
+  ASSERT_TRUE(solved.ok());
+  EXPECT_LT((solved->world_T_camera.translation - truth.world_T_camera.translation).norm(), 2e-3);
+  EXPECT_EQ(solved->fx, truth.fx);
+
+  // Bad input: a missing image, an unreadable camera file, a points file with a bad entry.
+  run = Teachsim("calibrate extrinsics --camera " + dir + "/camera.json --image " + dir +
+                 "/none.png --points " + dir + "/points.json --out " + dir + "/out.json");
+  EXPECT_EQ(run.status, 2);
+  EXPECT_NE(run.err.find(dir + "/none.png: cannot read the image"), std::string::npos) << run.err;
+  std::ofstream(dir + "/garbage.json") << "{\"fx\": ";
+  run = Teachsim("calibrate extrinsics --camera " + dir + "/garbage.json --image " + dir +
+                 "/image.png --points " + dir + "/points.json --out " + dir + "/out.json");
+  EXPECT_EQ(run.status, 2);
+  EXPECT_NE(run.err.find(dir + "/garbage.json"), std::string::npos) << run.err;
+  std::ofstream(dir + "/bad_points.json") << R"({"points": [{"pixel": [1, 2], "world": [0, 0]}]})";
+  run = Teachsim("calibrate extrinsics --camera " + dir + "/camera.json --image " + dir +
+                 "/image.png --points " + dir + "/bad_points.json --out " + dir + "/out.json");
+  EXPECT_EQ(run.status, 2);
+  EXPECT_NE(run.err.find("bad_points.json: points[0].world"), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/out.json"));
+}
+
+}  // namespace
+}  // namespace teachsim::worksite
