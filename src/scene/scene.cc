@@ -190,6 +190,20 @@ Result<CameraSpec> LoadCamera(const std::string& path) {
   return json::Decode<CameraSpec>(*document, path, [](const Reader& r) { return ReadCamera(r); });
 }
 
+SceneObject BoxObject(const std::string& name, bool fixed, const Eigen::Vector3d& size_m,
+                      const geometry::Pose3& world_T_object) {
+  SceneObject o;
+  o.name = name;
+  o.fixed = fixed;
+  o.shape_spec.kind = ShapeSpec::Kind::kBox;
+  o.shape_spec.box_size = size_m;
+  auto shape = BuildShape(o.shape_spec);
+  TEACHSIM_CHECK_MSG(shape.ok(), "BoxObject: box sides must be > 0");
+  o.shape = std::move(shape).value();
+  o.world_T_object = world_T_object;
+  return o;
+}
+
 Result<geometry::Shape> BuildShape(const ShapeSpec& spec) {
   std::vector<geometry::ShapePart> parts;
   TEACHSIM_RETURN_IF_ERROR(AppendParts(spec, geometry::Pose3::Identity(), &parts));

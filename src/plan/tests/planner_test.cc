@@ -139,13 +139,7 @@ TEST(Planner, SamePathGivesAByteIdenticalProgram) {
 TEST(Planner, TightFitIsAClearError) {
   scene::Scene scene;
   auto add = [&](const std::string& name, bool fixed, Eigen::Vector3d size, Eigen::Vector3d position) {
-    scene::SceneObject o;
-    o.name = name;
-    o.fixed = fixed;
-    o.shape_spec.box_size = size;
-    o.shape = scene::BuildShape(o.shape_spec).value();
-    o.world_T_object = geometry::Pose3::Translation(position);
-    scene.objects.push_back(o);
+    scene.objects.push_back(scene::BoxObject(name, fixed, size, geometry::Pose3::Translation(position)));
   };
   add("table", true, {0.4, 0.4, 0.05}, {0, 0, -0.025});
   add("left", true, {0.02, 0.1, 0.03}, {-0.0225 - 0.0003 - 0.01, 0, 0.015});

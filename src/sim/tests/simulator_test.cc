@@ -157,14 +157,7 @@ TEST(Simulator, RandomDragsNeverPenetrate) {
 TEST(Simulator, ThinPlateIsNeverTunnelled) {
   scene::Scene scene;
   auto add = [&](const std::string& name, bool fixed, Eigen::Vector3d size, Eigen::Vector3d position) {
-    scene::SceneObject o;
-    o.name = name;
-    o.fixed = fixed;
-    o.shape_spec.kind = scene::ShapeSpec::Kind::kBox;
-    o.shape_spec.box_size = size;
-    o.shape = scene::BuildShape(o.shape_spec).value();
-    o.world_T_object = geometry::Pose3::Translation(position);
-    scene.objects.push_back(o);
+    scene.objects.push_back(scene::BoxObject(name, fixed, size, geometry::Pose3::Translation(position)));
   };
   add("table", true, {0.8, 0.6, 0.05}, {0, 0, -0.025});
   add("plate", true, {0.001, 0.58, 0.1}, {0, 0, 0.05});  // a 1 mm wall across the table at x = 0

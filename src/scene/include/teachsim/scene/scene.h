@@ -75,6 +75,10 @@ CameraSpec ReadCamera(const json::Reader& reader);
 json::Json WriteCamera(const CameraSpec& camera);
 [[nodiscard]] Result<CameraSpec> LoadCamera(const std::string& path);  // a file holding one camera entry
 
+// A box-shaped object (full side lengths size_m, centred), for scenes built in code.
+SceneObject BoxObject(const std::string& name, bool fixed, const Eigen::Vector3d& size_m,
+                      const geometry::Pose3& world_T_object);
+
 // Builds the geometry of a validated spec.
 [[nodiscard]] Result<geometry::Shape> BuildShape(const ShapeSpec& spec);
 
