@@ -21,6 +21,7 @@ void AddPlanCommand(CLI::App& app, Runner* run);
 void AddRenderCommand(CLI::App& app, Runner* run);
 void AddCalibrateCommand(CLI::App& app, Runner* run);
 void AddRobotCommand(CLI::App& app, Runner* run);
+void AddExecuteCommand(CLI::App& app, Runner* run);
 
 // Prints "teachsim: error: MESSAGE" to stderr and returns the status's exit code.
 int ReportError(const Status& status);

@@ -37,6 +37,7 @@ int main(int argc, char** argv) {
   AddRenderCommand(app, &run);
   AddCalibrateCommand(app, &run);
   AddRobotCommand(app, &run);
+  AddExecuteCommand(app, &run);
   AddBenchCommand(app, &run);
   try {
     app.parse(argc, argv);

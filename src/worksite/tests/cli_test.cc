@@ -1,3 +1,4 @@
+#include <unistd.h>
 // The `render` and `calibrate` commands end to end, and their errors on bad input (exit status 2,
 // a message naming the file and the problem).
 #include <gtest/gtest.h>
@@ -26,14 +27,15 @@ std::string Slurp(const std::string& path) {
 }
 
 CommandRun Teachsim(const std::string& args) {
-  const std::string dir = ::testing::TempDir();
+  // ctest runs every test as its own process, in parallel: the capture files are per process.
+  const std::string stem = ::testing::TempDir() + "/cli_" + std::to_string(::getpid());
   const std::string command =
-      std::string(TEACHSIM_BINARY) + " " + args + " > " + dir + "/cli_out.txt 2> " + dir + "/cli_err.txt";
+      std::string(TEACHSIM_BINARY) + " " + args + " > " + stem + "_out.txt 2> " + stem + "_err.txt";
   const int raw = std::system(command.c_str());
   CommandRun run;
   run.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  run.out = Slurp(dir + "/cli_out.txt");
-  run.err = Slurp(dir + "/cli_err.txt");
+  run.out = Slurp(stem + "_out.txt");
+  run.err = Slurp(stem + "_err.txt");
   return run;
 }
 
