@@ -10,6 +10,8 @@
 #include "plan_report.h"
 #include "teachsim/sim/demos.h"
 #include "teachsim/sim/script.h"
+#include "teachsim/robot/robot_model.h"
+#include "teachsim/worksite/execute.h"
 
 namespace teachsim::app {
 
@@ -98,8 +100,28 @@ int RunDemo(const std::string& which, const std::string& scene_path, const std::
     PrintPlanMetrics(planned->metrics);
     std::printf("%s", robot::ProgramListing(planned->program).c_str());
     if (!planned->metrics.required_contacts_kept) ++failures;
+    // Execution on the (MuJoCo-simulated) work site, with the monitor verifying the contacts.
+    if (!scene->robot) return ReportError(Status::InvalidInput(scene_path + ": robot: missing (the demo executes on it)"));
+    auto model = robot::LoadRobotModel(DataPath("robots/" + scene->robot->model + ".json"));
+    if (!model.ok()) return ReportError(model.status());
+    worksite::ExecuteOptions execute_options;
+    auto executed = worksite::Execute(*scene, *model, planned->program, execute_options);
+    if (!executed.ok()) {
+      std::printf("  execution refused: %s\n", executed.status().message().c_str());
+      ++failures;
+      continue;
+    }
+    const std::string report_file = (std::filesystem::path(out_dir) / (name + ".report.json")).string();
+    if (Status s = json::WriteJsonFile(report_file, worksite::ExecuteResultToJson(*executed, execute_options)); !s.ok()) {
+      return ReportError(s);
+    }
+    std::printf("  execution           %s: %s (%.1f s simulated, %.0fx real time; workpiece %.2f mm / %.2f deg from "
+                "the intent) -> %s\n",
+                executed->success ? "SUCCESS" : "FAILED", executed->message.c_str(), executed->simulated_s,
+                executed->real_time_factor(), executed->workpiece_position_error_m * 1e3,
+                executed->workpiece_angle_error_rad * 180.0 / M_PI, report_file.c_str());
+    if (!executed->success) ++failures;
   }
-  std::printf("(execution on the work site joins the demo with the MuJoCo work site)\n");
   return failures > 0 ? 1 : 0;
 }
 

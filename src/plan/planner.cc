@@ -445,15 +445,18 @@ Result<robot::Program> MakeProgram(const sim::SimWorld& world, const Band& band,
   program.workpiece = wp.name;
   // The fingers hold the top grip_depth of the block from above: tool z points down, the jaws
   // close along the block's y axis.
+  // On a thin block, a biased target must not drive the fingertips into what the block rests on:
+  // they stay at least d (plus 1 mm) above its bottom.
+  const double grip = std::min(o.grip_depth_m, std::max(0.003, box.Size().z() - o.bias_depth_m - 0.001));
   program.workpiece_T_tool =
       geometry::Pose3(Eigen::Quaterniond(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX())),
-                      Eigen::Vector3d(box.Center().x(), box.Center().y(), box.max.z() - o.grip_depth_m));
+                      Eigen::Vector3d(box.Center().x(), box.Center().y(), box.max.z() - grip));
   auto tool = [&](const geometry::Pose3& world_T_workpiece) { return world_T_workpiece * program.workpiece_T_tool; };
 
   robot::GraspCommand grasp;
   grasp.world_T_tool = tool(band.nodes.front().pose);
   grasp.width_m = box.Size().y();
-  grasp.open_width_m = box.Size().y() + 0.025;
+  grasp.open_width_m = box.Size().y() + 0.015;  // 7.5 mm each side; within the 80 mm jaws for 60 mm blocks
   program.commands.push_back(grasp);
 
   sim::SimState state;
