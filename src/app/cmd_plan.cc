@@ -21,8 +21,9 @@ void PrintPlanMetrics(const plan::PlanMetrics& m) {
   std::printf("  clearance           %s demonstrated -> %s programmed (to unwanted obstacles, away from contacts)\n",
               mm(m.min_clearance_before_m).c_str(), mm(m.min_clearance_after_m).c_str());
   std::printf("  required contacts   %s (%d nodes)\n", m.required_contacts_kept ? "kept" : "NOT KEPT", m.required_nodes);
-  std::printf("  deformation         %d iterations, %.1f ms; simplification %.1f ms; total %.1f ms\n", m.iterations,
-              m.deform_ms, m.simplify_ms, m.total_ms);
+  std::printf("  deformation         %d iterations (%s), %.1f ms; simplification %.1f ms; total %.1f ms\n",
+              m.iterations, m.band_converged ? "settled" : "budget used up, not settled", m.deform_ms, m.simplify_ms,
+              m.total_ms);
 }
 
 Status WritePlanOutputs(const plan::PlanResult& result, const std::string& program_file, const std::string& prefix) {

@@ -125,6 +125,27 @@ TEST(Planner, AroundTheCornerKeepsCapturedContactAndLiftsTheApproach) {
   ExpectBiasSolves(result->program, PlanOptions{}.bias_depth_m);
 }
 
+// The band settles (paper §6.1: "until the path stabilises") inside the iteration budget on all
+// three demonstrations, rather than running out of sweeps while nodes still hop about.
+TEST(Planner, BandConvergesWithinTheIterationBudget) {
+  const std::vector<std::function<Result<sim::DragScript>(const scene::Scene&)>> scripts = {
+      [](const scene::Scene& s) { return sim::CorneringScript(s, {}); },
+      [](const scene::Scene& s) {
+        sim::CorneringVariation v;
+        v.wander = true;
+        return sim::CorneringScript(s, v);
+      },
+      [](const scene::Scene& s) { return sim::AroundCornerScript(s); }};
+  for (const auto& script : scripts) {
+    Demo d = Demonstrate(script);
+    auto result = GenerateProgram(d.scene, d.path);
+    ASSERT_TRUE(result.ok()) << result.status().message();
+    std::printf("band iterations: %d of %d\n", result->metrics.iterations, PlanOptions{}.max_iterations);
+    EXPECT_TRUE(result->metrics.band_converged);
+    EXPECT_LE(result->metrics.iterations, PlanOptions{}.max_iterations);
+  }
+}
+
 TEST(Planner, SamePathGivesAByteIdenticalProgram) {
   Demo d = Demonstrate([](const scene::Scene& s) { return sim::CorneringScript(s, {}); });
   auto a = GenerateProgram(d.scene, d.path);

@@ -29,7 +29,7 @@ struct PlanOptions {
   double repulsion_range_m = 0.013;    // unwanted obstacles closer than this push the node away
   double repulsion_n_per_m = 100.0;    // 2 N at contact, more than the tension
   int max_iterations = 200;
-  double converged_m = 1e-4;           // a sweep that moves no node farther than this ends it
+  double converged_m = 5e-5;           // a sweep whose nodes move less than this on average settles the band
   double max_spacing_m = 0.0;          // 0: half the thinnest part in the scene (5 mm lip: 2.5 mm)
 
   // Simplification.
@@ -68,6 +68,7 @@ struct PlanMetrics {
   int required_nodes = 0;
   bool required_contacts_kept = true;
   int iterations = 0;
+  bool band_converged = false;
   double deform_ms = 0.0, simplify_ms = 0.0, total_ms = 0.0;
 };
 
@@ -86,7 +87,11 @@ struct Band {
   int workpiece = -1;
 };
 [[nodiscard]] Result<Band> MakeBand(const sim::SimWorld& world, const sim::WorkpiecePath& path, const PlanOptions& options);
-int Deform(const sim::SimWorld& world, Band& band, const PlanOptions& options);  // returns iterations
+struct DeformStats {
+  int iterations = 0;      // sweeps over the band, all levels
+  bool converged = false;  // the final (finest) level settled before max_iterations ran out
+};
+DeformStats Deform(const sim::SimWorld& world, Band& band, const PlanOptions& options);
 std::vector<int> Simplify(const sim::SimWorld& world, const Band& band, const PlanOptions& options);  // knot indices
 [[nodiscard]] Result<robot::Program> MakeProgram(const sim::SimWorld& world, const Band& band,
                                                  const std::vector<int>& knots, const PlanOptions& options);
