@@ -58,6 +58,7 @@ Result<ConvexPolyhedron> ConvexPolyhedron::Box(const Eigen::Vector3d& size) {
     p.faces_.push_back(face);
   }
   p.BuildTopology();
+  p.is_box_ = true;
   return p;
 }
 
@@ -192,6 +193,30 @@ void ConvexPolyhedron::BuildTopology() {
   for (int f = 0; f < static_cast<int>(faces_.size()); ++f) {
     for (int v : faces_[f].vertices) vertex_faces_[v].push_back(f);
   }
+  adjacency_begin_.assign(nv + 1, 0);
+  for (const Edge& e : edges_) {
+    ++adjacency_begin_[e.v0 + 1];
+    ++adjacency_begin_[e.v1 + 1];
+  }
+  for (std::size_t i = 0; i < nv; ++i) adjacency_begin_[i + 1] += adjacency_begin_[i];
+  adjacency_.assign(edges_.size() * 2, 0);
+  adjacency_edge_.assign(edges_.size() * 2, 0);
+  {
+    std::vector<int> fill(adjacency_begin_.begin(), adjacency_begin_.end() - 1);
+    for (int k = 0; k < static_cast<int>(edges_.size()); ++k) {
+      const Edge& e = edges_[k];
+      adjacency_[fill[e.v0]] = e.v1;
+      adjacency_edge_[fill[e.v0]++] = k;
+      adjacency_[fill[e.v1]] = e.v0;
+      adjacency_edge_[fill[e.v1]++] = k;
+    }
+  }
+  face_masks_.assign(faces_.size(), 0);
+  if (nv <= 64) {
+    for (std::size_t f = 0; f < faces_.size(); ++f) {
+      for (int v : faces_[f].vertices) face_masks_[f] |= std::uint64_t{1} << v;
+    }
+  }
   local_bounds_ = Aabb();
   bounding_radius_ = 0.0;
   centroid_.setZero();
@@ -225,11 +250,13 @@ double ConvexPolyhedron::Volume() const {
 
 int ConvexPolyhedron::Support(const Eigen::Vector3d& direction, int hint) const {
   const int n = static_cast<int>(vertices_.size());
-  if (hint < 0 || hint >= n || n <= 16) {
+  const double dx = direction.x(), dy = direction.y(), dz = direction.z();
+  const Eigen::Vector3d* v = vertices_.data();
+  if (hint < 0 || hint >= n || n <= kScanVertices) {
     int best = 0;
-    double best_dot = vertices_[0].dot(direction);
+    double best_dot = v[0].x() * dx + v[0].y() * dy + v[0].z() * dz;
     for (int i = 1; i < n; ++i) {
-      double d = vertices_[i].dot(direction);
+      const double d = v[i].x() * dx + v[i].y() * dy + v[i].z() * dz;
       if (d > best_dot) {
         best_dot = d;
         best = i;
@@ -239,11 +266,15 @@ int ConvexPolyhedron::Support(const Eigen::Vector3d& direction, int hint) const 
   }
   // Hill climb: on a convex polyhedron a vertex with no better neighbour is a global maximum.
   int best = hint;
-  double best_dot = vertices_[hint].dot(direction);
+  double best_dot = v[hint].x() * dx + v[hint].y() * dy + v[hint].z() * dz;
+  const int* begin = adjacency_begin_.data();
+  const int* adjacent = adjacency_.data();
   for (bool improved = true; improved;) {
     improved = false;
-    for (int nb : neighbors_[best]) {
-      double d = vertices_[nb].dot(direction);
+    const int from = best;
+    for (int k = begin[from]; k < begin[from + 1]; ++k) {
+      const int nb = adjacent[k];
+      const double d = v[nb].x() * dx + v[nb].y() * dy + v[nb].z() * dz;
       if (d > best_dot) {
         best_dot = d;
         best = nb;
@@ -252,6 +283,13 @@ int ConvexPolyhedron::Support(const Eigen::Vector3d& direction, int hint) const 
     }
   }
   return best;
+}
+
+int ConvexPolyhedron::EdgeBetween(int v0, int v1) const {
+  for (int k = adjacency_begin_[v0]; k < adjacency_begin_[v0 + 1]; ++k) {
+    if (adjacency_[k] == v1) return adjacency_edge_[k];
+  }
+  return -1;
 }
 
 Aabb ConvexPolyhedron::WorldBounds(const Pose3& world_T_body) const {

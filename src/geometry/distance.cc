@@ -9,6 +9,7 @@
 #include <Eigen/Dense>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <initializer_list>
 #include <limits>
@@ -24,10 +25,10 @@ double ClosestPointsBruteForce(const ConvexPolyhedron& a, const Pose3& world_T_a
 constexpr int kMaxIterations = 64;
 constexpr double kTouching = 1e-12;  // m: |v| below this counts as intersecting
 
+// A point of C = B - A (A's frame) and the support vertices it came from. The points on A and B
+// are rebuilt from the indices once at the end, so the simplex moves 32 bytes per vertex.
 struct Vertex {
-  Eigen::Vector3d w;  // b - a, in A's frame
-  Eigen::Vector3d a;  // on A, A's frame
-  Eigen::Vector3d b;  // on B, A's frame
+  Eigen::Vector3d w;
   int ia = 0, ib = 0;
 };
 
@@ -51,7 +52,7 @@ struct Candidate {
   Eigen::Vector3d point = Eigen::Vector3d::Zero();
 };
 
-void Apply(Simplex& s, const Candidate& c) {
+inline void Apply(Simplex& s, const Candidate& c) {
   Vertex v[3];
   for (int k = 0; k < c.n; ++k) v[k] = s.v[c.index[k]];
   for (int k = 0; k < c.n; ++k) {
@@ -61,14 +62,14 @@ void Apply(Simplex& s, const Candidate& c) {
   s.n = c.n;
 }
 
-Candidate One(const Simplex& s, int i) {
+inline Candidate One(const Simplex& s, int i) {
   Candidate c;
   c.index[0] = i;
   c.point = s.v[i].w;
   return c;
 }
 
-Candidate Two(const Simplex& s, int i, int j, double t) {
+inline Candidate Two(const Simplex& s, int i, int j, double t) {
   Candidate c;
   c.n = 2;
   c.index[0] = i;
@@ -79,7 +80,7 @@ Candidate Two(const Simplex& s, int i, int j, double t) {
   return c;
 }
 
-Candidate SegmentCandidate(const Simplex& s, int i, int j) {
+inline Candidate SegmentCandidate(const Simplex& s, int i, int j) {
   const Eigen::Vector3d& a = s.v[i].w;
   const Eigen::Vector3d ab = s.v[j].w - a;
   const double denom = ab.squaredNorm();
@@ -90,7 +91,7 @@ Candidate SegmentCandidate(const Simplex& s, int i, int j) {
 }
 
 // Triangle s.v[i], s.v[j], s.v[k].
-Candidate TriangleCandidate(const Simplex& s, int i, int j, int k) {
+inline Candidate TriangleCandidate(const Simplex& s, int i, int j, int k) {
   const Eigen::Vector3d& a = s.v[i].w;
   const Eigen::Vector3d& b = s.v[j].w;
   const Eigen::Vector3d& c = s.v[k].w;
@@ -129,21 +130,28 @@ Candidate TriangleCandidate(const Simplex& s, int i, int j, int k) {
   return out;
 }
 
-// Returns true when the origin lies inside the tetrahedron.
+// Returns true when the origin lies inside the tetrahedron. Vertex 3 is the newest: it was found
+// beyond the previous triangle (0 1 2) along -v, so in exact arithmetic the origin is on the inner
+// side of that face and the closest feature holds vertex 3. That face is therefore tested last,
+// and only when the other three leave the origin inside or the tetrahedron is flat (then every
+// face counts, as before); a wrong guess costs an iteration, never safety (the certificate).
 bool SolveTetrahedron(Simplex& s, Eigen::Vector3d* closest) {
-  static constexpr int kFaces[4][4] = {{0, 1, 2, 3}, {0, 2, 3, 1}, {0, 3, 1, 2}, {1, 3, 2, 0}};  // i j k, opposite
+  static constexpr int kFaces[4][4] = {{0, 2, 3, 1}, {0, 3, 1, 2}, {1, 3, 2, 0}, {0, 1, 2, 3}};  // i j k, opposite
   Candidate best;
   double best_norm = std::numeric_limits<double>::infinity();
-  bool any_outside = false;
+  bool any_outside = false, any_flat = false;
   const double scale = (s.v[1].w - s.v[0].w).squaredNorm() + (s.v[2].w - s.v[0].w).squaredNorm() +
                        (s.v[3].w - s.v[0].w).squaredNorm();
+  const double flat_limit = 1e-14 * scale * std::sqrt(scale);
   for (const auto& f : kFaces) {
+    if (f[3] == 3 && any_outside && !any_flat) break;
     const Eigen::Vector3d& a = s.v[f[0]].w;
     const Eigen::Vector3d n = (s.v[f[1]].w - a).cross(s.v[f[2]].w - a);
     const double side_origin = -n.dot(a);
     const double side_other = n.dot(s.v[f[3]].w - a);
     // Flat tetrahedra (|side_other| tiny) are treated as open on every face.
-    const bool flat = std::abs(side_other) <= 1e-14 * scale * std::sqrt(scale);
+    const bool flat = std::abs(side_other) <= flat_limit;
+    any_flat = any_flat || flat;
     if (!flat && side_origin * side_other >= 0.0) continue;  // origin on the inner side of this face
     any_outside = true;
     const Candidate c = TriangleCandidate(s, f[0], f[1], f[2]);
@@ -161,7 +169,7 @@ bool SolveTetrahedron(Simplex& s, Eigen::Vector3d* closest) {
   return false;
 }
 
-bool SolveSimplex(Simplex& s, Eigen::Vector3d* closest) {
+inline bool SolveSimplex(Simplex& s, Eigen::Vector3d* closest) {
   switch (s.n) {
     case 1:
       s.lambda[0] = 1.0;
@@ -254,68 +262,96 @@ bool SolveSimplexRobust(Simplex& s, Eigen::Vector3d* closest) {
   return inside;
 }
 
-// The feature spanned by a set of distinct vertex indices of p.
-Feature FeatureOf(const ConvexPolyhedron& p, int* indices, int count) {
-  std::sort(indices, indices + count);
-  count = static_cast<int>(std::unique(indices, indices + count) - indices);
-  if (count == 1) return {Feature::Type::kVertex, indices[0]};
-  if (count == 2) {
-    for (int f : p.vertex_faces(indices[0])) {
-      for (int e : p.faces()[f].edges) {
-        const Edge& edge = p.edges()[e];
-        if ((edge.v0 == indices[0] && edge.v1 == indices[1]) || (edge.v0 == indices[1] && edge.v1 == indices[0])) {
-          return {Feature::Type::kEdge, e};
-        }
-      }
+// The feature spanned by a set of vertex indices of p (count <= 4, duplicates allowed): a
+// vertex, the edge joining two, else the face holding them all (else the lowest vertex).
+Feature FeatureOf(const ConvexPolyhedron& p, const int* indices, int count) {
+  if (p.vertices().size() <= 64) {
+    // As a bit set: duplicates merge, the lowest index is the first set bit.
+    std::uint64_t wanted = 0;
+    for (int i = 0; i < count; ++i) wanted |= std::uint64_t{1} << indices[i];
+    const int lowest = std::countr_zero(wanted);
+    const std::uint64_t rest = wanted & (wanted - 1);  // without the lowest
+    if (rest == 0) return {Feature::Type::kVertex, lowest};
+    if ((rest & (rest - 1)) == 0) {
+      if (const int e = p.EdgeBetween(lowest, std::countr_zero(rest)); e >= 0) return {Feature::Type::kEdge, e};
     }
+    for (int f : p.vertex_faces(lowest)) {
+      if ((p.face_vertex_mask(f) & wanted) == wanted) return {Feature::Type::kFace, f};
+    }
+    return {Feature::Type::kVertex, lowest};
   }
-  for (int f : p.vertex_faces(indices[0])) {
+  int sorted[4] = {indices[0], 0, 0, 0};
+  int unique = 0;
+  for (int i = 0; i < count; ++i) {  // insertion without duplicates
+    int j = unique;
+    bool duplicate = false;
+    for (int k = 0; k < unique; ++k) duplicate = duplicate || sorted[k] == indices[i];
+    if (duplicate) continue;
+    for (; j > 0 && sorted[j - 1] > indices[i]; --j) sorted[j] = sorted[j - 1];
+    sorted[j] = indices[i];
+    ++unique;
+  }
+  count = unique;
+  if (count == 1) return {Feature::Type::kVertex, sorted[0]};
+  if (count == 2) {
+    if (const int e = p.EdgeBetween(sorted[0], sorted[1]); e >= 0) return {Feature::Type::kEdge, e};
+  }
+  for (int f : p.vertex_faces(sorted[0])) {
     const std::vector<int>& fv = p.faces()[f].vertices;
     bool all = true;
-    for (int i = 1; i < count && all; ++i) all = std::find(fv.begin(), fv.end(), indices[i]) != fv.end();
+    for (int i = 1; i < count && all; ++i) all = std::find(fv.begin(), fv.end(), sorted[i]) != fv.end();
     if (all) return {Feature::Type::kFace, f};
   }
-  return {Feature::Type::kVertex, indices[0]};
+  return {Feature::Type::kVertex, sorted[0]};
+}
+
+// Index of a box's support vertex: bit k set when the direction's k-th component is positive
+// (ConvexPolyhedron::Box numbers its vertices that way).
+inline int BoxSupport(double dx, double dy, double dz) {
+  return (dx > 0.0 ? 1 : 0) | (dy > 0.0 ? 2 : 0) | (dz > 0.0 ? 4 : 0);
 }
 
 }  // namespace
 
 DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const ConvexPolyhedron& b,
                         const Pose3& world_T_b, DistanceCache* cache) {
-  const Pose3 a_T_b = world_T_a.Inverse() * world_T_b;
-  const Eigen::Matrix3d r_ab = a_T_b.RotationMatrix();
-  const Eigen::Vector3d t_ab = a_T_b.translation;
-  const auto& va = a.vertices();
-  const auto& vb = b.vertices();
+  // B's placement in A's frame, once per query: GJK runs in A's frame, so A's support points are
+  // its own vertices and B's are one rotation away (r_ab maps B's directions and points).
+  const Eigen::Quaterniond q_a_world = world_T_a.rotation.conjugate();
+  const Eigen::Matrix3d r_ab = (q_a_world * world_T_b.rotation).toRotationMatrix();
+  const Eigen::Vector3d t_ab = q_a_world * (world_T_b.translation - world_T_a.translation);
+  const Eigen::Vector3d* va = a.vertices().data();
+  const Eigen::Vector3d* vb = b.vertices().data();
+  const int na = static_cast<int>(a.vertices().size());
+  const int nb = static_cast<int>(b.vertices().size());
+  const bool box_a = a.is_box(), box_b = b.is_box();
 
-  auto make_vertex = [&](int ia, int ib) {
-    Vertex v;
-    v.ia = ia;
-    v.ib = ib;
-    v.a = va[ia];
-    v.b = r_ab * vb[ib] + t_ab;
-    v.w = v.b - v.a;
-    return v;
-  };
+  auto point_b = [&](int ib) -> Eigen::Vector3d { return r_ab * vb[ib] + t_ab; };
   int hint_a = -1, hint_b = -1;
-  // Support of C = B - A in direction d: max over B of d.b, min over A of d.a.
+  // Support of C = B - A in direction d (A's frame): max over B of d.b, min over A of d.a.
   auto support = [&](const Eigen::Vector3d& d) {
-    int ib = b.Support(r_ab.transpose() * d, hint_b);
-    int ia = a.Support(-d, hint_a);
-    hint_a = ia;
-    hint_b = ib;
-    return make_vertex(ia, ib);
+    Vertex out;
+    const Eigen::Vector3d d_in_b = r_ab.transpose() * d;
+    out.ib = box_b ? BoxSupport(d_in_b.x(), d_in_b.y(), d_in_b.z()) : b.Support(d_in_b, hint_b);
+    out.ia = box_a ? BoxSupport(-d.x(), -d.y(), -d.z()) : a.Support(-d, hint_a);
+    hint_a = out.ia;
+    hint_b = out.ib;
+    out.w = point_b(out.ib) - va[out.ia];
+    return out;
   };
 
   Simplex s;
   if (cache != nullptr && cache->count > 0) {
     for (int i = 0; i < cache->count; ++i) {
-      int ia = cache->index_a[i], ib = cache->index_b[i];
-      if (ia < 0 || ib < 0 || ia >= static_cast<int>(va.size()) || ib >= static_cast<int>(vb.size())) {
+      const int ia = cache->index_a[i], ib = cache->index_b[i];
+      if (ia < 0 || ib < 0 || ia >= na || ib >= nb) {
         s.n = 0;
         break;
       }
-      s.v[s.n++] = make_vertex(ia, ib);
+      Vertex& x = s.v[s.n++];
+      x.ia = ia;
+      x.ib = ib;
+      x.w = point_b(ib) - va[ia];
     }
     if (s.n > 0) {
       hint_a = s.v[0].ia;
@@ -330,6 +366,8 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
     s.n = 1;
   }
 
+  // The warm path is the first pass of this loop: the cached simplex, re-posed, gives v, one
+  // support query tests its separating plane, and a still-valid certificate ends the query.
   Eigen::Vector3d v;
   bool inside = SolveSimplex(s, &v);
   double lower = 0.0;
@@ -340,7 +378,7 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
     ++iterations;
     const double vnorm = v.norm();
     if (vnorm <= kTouching) break;
-    Vertex w = support(-v);
+    const Vertex w = support(-v);
     lower = std::max(lower, v.dot(w.w) / vnorm);
     if (vnorm - lower <= kDistanceTolerance) break;
     bool repeated = false;
@@ -369,27 +407,33 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
   DistanceResult result;
   result.iterations = iterations;
   result.exhaustive = exhaustive;
+  const Eigen::Matrix3d r_world_a = world_T_a.rotation.toRotationMatrix();
   Eigen::Vector3d pa_world, pb_world;
   if (exhaustive) {
     lower = ClosestPointsBruteForce(a, world_T_a, b, world_T_b, &pa_world, &pb_world);
-    v = world_T_a.rotation.conjugate() * (pb_world - pa_world);
+    v = r_world_a.transpose() * (pb_world - pa_world);
   }
   const double upper = v.norm();
   result.intersecting = inside || upper <= kTouching;
   result.upper_bound = result.intersecting ? 0.0 : upper;
   result.distance = result.intersecting ? 0.0 : std::max(0.0, std::min(lower, upper));
-  Eigen::Vector3d pa = Eigen::Vector3d::Zero(), pb = Eigen::Vector3d::Zero();
-  int ia[4], ib[4];
+  // v = sum lambda_i (b_i - a_i) = point_b - point_a in A's frame, so only A's point is rebuilt.
+  const Eigen::Vector3d v_world = r_world_a * v;
+  if (exhaustive) {
+    result.point_a = pa_world;
+    result.point_b = pb_world;
+  } else {
+    Eigen::Vector3d pa = s.lambda[0] * va[s.v[0].ia];
+    for (int i = 1; i < s.n; ++i) pa += s.lambda[i] * va[s.v[i].ia];
+    result.point_a = r_world_a * pa + world_T_a.translation;
+    result.point_b = result.point_a + v_world;
+  }
+  result.normal = upper > kTouching ? Eigen::Vector3d(v_world / upper) : Eigen::Vector3d(r_world_a.col(2));
+  int ia[4] = {0, 0, 0, 0}, ib[4] = {0, 0, 0, 0};
   for (int i = 0; i < s.n; ++i) {
-    pa += s.lambda[i] * s.v[i].a;
-    pb += s.lambda[i] * s.v[i].b;
     ia[i] = s.v[i].ia;
     ib[i] = s.v[i].ib;
   }
-  result.point_a = exhaustive ? pa_world : world_T_a * pa;
-  result.point_b = exhaustive ? pb_world : world_T_a * pb;
-  Eigen::Vector3d n_in_a = upper > kTouching ? Eigen::Vector3d(v / upper) : Eigen::Vector3d::UnitZ();
-  result.normal = world_T_a.Rotate(n_in_a);
   result.feature_a = FeatureOf(a, ia, s.n);
   result.feature_b = FeatureOf(b, ib, s.n);
   if (cache != nullptr) {
