@@ -36,6 +36,20 @@ EXAMPLES = {
     "console_output": {"text": "selected cube45", "ok": True, "in_reply_to": 9},
     "session_save": {"name": "corner-demo_1"},
     "session_load": {"name": "corner-demo_1"},
+    "world_state": {"revision": 4,
+                    "objects": [{"name": "cube", "fixed": False, "model": "cube45",
+                                 "shape": {"box": [0.045, 0.045, 0.045]}, "world_T_object": POSE,
+                                 "origin": "scene"}],
+                    "workpiece": "cube", "capture": ["frame"], "dragging": False, "demonstrations": 1,
+                    "models": [{"name": "cube45", "shape": {"box": [0.045, 0.045, 0.045]}}],
+                    "cameras": [], "robot": None,
+                    "link": {"state": "up", "stopped": False, "reason": "connected", "rtt_s": None},
+                    "lease_holder": 1, "busy": "",
+                    "paths": {"initial": [POSE, POSE], "deformed": [], "simplified": []},
+                    "program": {"id": "p1", "command_count": 3, "listing": "1 grasp"},
+                    "report": None, "sim_rate_hz": 60.5},
+    "worksite_scene": {"scene": {"objects": []},
+                       "models": [{"name": "cube45", "shape": {"box": [0.045, 0.045, 0.045]}}]},
 }
 
 

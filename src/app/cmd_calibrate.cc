@@ -1,9 +1,12 @@
 // teachsim calibrate: the camera's intrinsics from chessboard images, and its pose from image points
 // of known world position (paper §4.2). Both write a camera entry of the scene format, atomically.
 //
-//   teachsim calibrate intrinsics --images DIR --board COLSxROWS --square METRES --out CAMERA.json [--name
-//   NAME] teachsim calibrate extrinsics --camera CAMERA.json --image IMG.png --points POINTS.json --out
-//   CAMERA.json
+// clang-format off
+//   teachsim calibrate intrinsics --images DIR --board COLSxROWS --square METRES --out CAMERA.json [--name NAME]
+//   teachsim calibrate extrinsics --camera CAMERA.json --image IMG.png --points POINTS.json --out CAMERA.json
+//                                 [--max-rms PX] [--click-sigma PX]
+// clang-format on
+#include <Eigen/Eigenvalues>
 #include <cstdio>
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
@@ -26,6 +29,7 @@ struct IntrinsicsArgs {
 struct ExtrinsicsArgs {
   std::string camera, image, points, out;
   double max_rms_px = 2.0;
+  double click_sigma_px = 0.5;
 };
 
 int RunIntrinsics(const IntrinsicsArgs& a) {
@@ -79,11 +83,21 @@ int RunExtrinsics(const ExtrinsicsArgs& a) {
                                               std::to_string(camera->height()) + " image"));
     }
   }
-  auto result = vision::CalibrateExtrinsics(*camera, *points);
+  vision::ExtrinsicsOptions options;
+  options.click_sigma_px = a.click_sigma_px;
+  if (Status s = options.Validate(); !s.ok()) return ReportError(s.WithPrefix("--click-sigma"));
+  auto result = vision::CalibrateExtrinsics(*camera, *points, options);
   if (!result.ok()) return ReportError(result.status().WithPrefix(a.points));
   const Eigen::Vector3d& p = result->world_T_camera.translation;
   std::printf("camera at (%.1f, %.1f, %.1f) mm; reprojection RMS %.3f px over %zu points\n", p.x() * 1e3,
               p.y() * 1e3, p.z() * 1e3, result->rms_px, points->size());
+  // The Cramer-Rao bound at the solution: what clicks of this accuracy allow with these points.
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> axes(result->position_covariance_m2);
+  const Eigen::Vector3d axis_sigma_mm = axes.eigenvalues().cwiseMax(0).cwiseSqrt() * 1e3;
+  std::printf(
+      "  predicted position uncertainty %.2f mm RMS (%.2f / %.2f / %.2f mm along its principal axes) "
+      "for %.2f px click noise\n",
+      result->position_sigma_m * 1e3, axis_sigma_mm(2), axis_sigma_mm(1), axis_sigma_mm(0), a.click_sigma_px);
   for (std::size_t i = 0; i < points->size(); ++i) {
     std::printf("  %-20s %.3f px\n", (*points)[i].name.c_str(), result->residuals_px[i]);
   }
@@ -126,6 +140,15 @@ void AddCalibrateCommand(CLI::App& app, Runner* run) {
   extr->add_option("--out", ex->out, "camera file to write (may be --camera)")->required();
   extr->add_option("--max-rms", ex->max_rms_px, "fail above this reprojection RMS, px")
       ->capture_default_str();
+  extr->add_option("--click-sigma", ex->click_sigma_px,
+                   "assumed click noise per coordinate, px (for the predicted uncertainty only)")
+      ->capture_default_str();
+  extr->footer(
+      "Points: click at least 6 features of known position spread over the image and not all on one\n"
+      "plane. In the default scene: the table corner in the image, three outer top corners of the\n"
+      "frame's walls (not the one next to the table corner) and the two inner top corners on the\n"
+      "other diagonal: 2.2 mm RMS at 0.5 px click noise (docs/formats/camera.md). Every extra\n"
+      "feature helps; sub-pixel clicks help most (the error scales with the click noise).\n");
   extr->callback([ex, run] { *run = [ex] { return RunExtrinsics(*ex); }; });
 }
 

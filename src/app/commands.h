@@ -22,6 +22,8 @@ void AddRenderCommand(CLI::App& app, Runner* run);
 void AddCalibrateCommand(CLI::App& app, Runner* run);
 void AddRobotCommand(CLI::App& app, Runner* run);
 void AddExecuteCommand(CLI::App& app, Runner* run);
+void AddRecognizeCommand(CLI::App& app, Runner* run);
+void AddUpCommand(CLI::App& app, Runner* run);  // up, worksite, operator
 
 // Prints "teachsim: error: MESSAGE" to stderr and returns the status's exit code.
 int ReportError(const Status& status);

@@ -38,6 +38,8 @@ int main(int argc, char** argv) {
   AddCalibrateCommand(app, &run);
   AddRobotCommand(app, &run);
   AddExecuteCommand(app, &run);
+  AddRecognizeCommand(app, &run);
+  AddUpCommand(app, &run);
   AddBenchCommand(app, &run);
   try {
     app.parse(argc, argv);

@@ -201,7 +201,7 @@ void ValidateDraggerInput(const Reader& r) {
 }
 
 void ValidatePoseUpdate(const Reader& r) {
-  TS_KEYS("t_s", "poses", "sim_rate_hz");
+  TS_KEYS("t_s", "poses", "sim_rate_hz", "world_T_dragger", "input_seq");
   ReadTime(r.At("t_s"));
   Reader poses = r.At("poses");
   std::size_t n = ReadListSize(poses);
@@ -212,6 +212,8 @@ void ValidatePoseUpdate(const Reader& r) {
     ReadPose(p.At("world_T_object"));
   }
   if (auto s = r.Find("sim_rate_hz")) s->NumberAtLeast(0.0);
+  if (auto s = r.Find("world_T_dragger")) ReadPose(*s);
+  if (auto s = r.Find("input_seq")) ReadSeq(*s);
 }
 
 void ValidateConsoleCommand(const Reader& r) {
@@ -230,6 +232,94 @@ void ValidateConsoleOutput(const Reader& r) {
 void ValidateSessionName(const Reader& r) {
   TS_KEYS("name");
   ReadSessionName(r.At("name"));
+}
+
+void ReadObjectField(const Reader& r) {
+  if (!r.IsObject()) r.Fail("must be an object");
+}
+
+void ReadNameList(const Reader& r) {
+  std::size_t n = ReadListSize(r);
+  for (std::size_t i = 0; i < n; ++i) ReadName(r.Index(i));
+}
+
+void ReadPoseList(const Reader& r) {
+  std::size_t n = ReadListSize(r);
+  for (std::size_t i = 0; i < n; ++i) ReadPose(r.Index(i));
+}
+
+// {name, shape}: a model of the library; the shape is checked by the scene reader where it is used.
+void ReadModelList(const Reader& r) {
+  std::size_t n = ReadListSize(r);
+  for (std::size_t i = 0; i < n; ++i) {
+    Reader m = r.Index(i);
+    m.RejectUnknownKeys({"name", "shape"});
+    ReadName(m.At("name"));
+    ReadObjectField(m.At("shape"));
+  }
+}
+
+void ValidateWorldState(const Reader& r) {
+  TS_KEYS("revision", "objects", "workpiece", "capture", "dragging", "demonstrations", "models", "cameras",
+          "robot", "link", "lease_holder", "busy", "paths", "program", "report", "sim_rate_hz");
+  r.At("revision").IntegerInRange(1, kMaxJsonInteger);
+  Reader objects = r.At("objects");
+  std::size_t n = ReadListSize(objects);
+  for (std::size_t i = 0; i < n; ++i) {
+    Reader o = objects.Index(i);
+    o.RejectUnknownKeys({"name", "fixed", "model", "shape", "world_T_object", "origin"});
+    ReadName(o.At("name"));
+    o.At("fixed").Bool();
+    std::string model = o.At("model").String();
+    if (model.size() > kMaxNameBytes) o.At("model").Fail("must be at most 256 bytes long");
+    ReadObjectField(o.At("shape"));
+    ReadPose(o.At("world_T_object"));
+    ReadOneOf(o.At("origin"), {"scene", "recognized"});
+  }
+  if (!r.At("workpiece").IsNull()) ReadName(r.At("workpiece"));
+  ReadNameList(r.At("capture"));
+  r.At("dragging").Bool();
+  r.At("demonstrations").IntegerInRange(0, kMaxJsonInteger);
+  ReadModelList(r.At("models"));
+  Reader cameras = r.At("cameras");
+  std::size_t nc = ReadListSize(cameras);
+  for (std::size_t i = 0; i < nc; ++i) ReadObjectField(cameras.Index(i));
+  if (!r.At("robot").IsNull()) ReadObjectField(r.At("robot"));
+  Reader link = r.At("link");
+  link.RejectUnknownKeys({"state", "stopped", "reason", "rtt_s"});
+  ReadOneOf(link.At("state"), {"up", "lost"});
+  link.At("stopped").Bool();
+  ReadText(link.At("reason"));
+  if (!link.At("rtt_s").IsNull()) ReadTime(link.At("rtt_s"));
+  ReadOptionalSessionId(r.At("lease_holder"));
+  ReadOneOf(r.At("busy"), {"", "planning", "executing"});
+  Reader paths = r.At("paths");
+  paths.RejectUnknownKeys({"initial", "deformed", "simplified"});
+  ReadPoseList(paths.At("initial"));
+  ReadPoseList(paths.At("deformed"));
+  ReadPoseList(paths.At("simplified"));
+  if (!r.At("program").IsNull()) {
+    Reader p = r.At("program");
+    p.RejectUnknownKeys({"id", "command_count", "listing"});
+    ReadName(p.At("id"));
+    p.At("command_count").IntegerInRange(0, 1000000);
+    ReadText(p.At("listing"));
+  }
+  if (!r.At("report").IsNull()) {
+    Reader p = r.At("report");
+    p.RejectUnknownKeys({"program_id", "ok", "summary"});
+    ReadName(p.At("program_id"));
+    p.At("ok").Bool();
+    ReadText(p.At("summary"));
+  }
+  r.At("sim_rate_hz").NumberAtLeast(0.0);
+}
+
+void ValidateWorksiteScene(const Reader& r) {
+  TS_KEYS("scene", "models");
+  // The scene's own fields are checked by the scene reader at the operator site.
+  ReadObjectField(r.At("scene"));
+  ReadModelList(r.At("models"));
 }
 
 #undef TS_KEYS
@@ -260,6 +350,8 @@ constexpr std::array kCatalogue = {
     MessageSpec{T::kConsoleOutput, "console_output", "operator site", false, false, ValidateConsoleOutput},
     MessageSpec{T::kSessionSave, "session_save", "browser", false, false, ValidateSessionName},
     MessageSpec{T::kSessionLoad, "session_load", "browser", false, true, ValidateSessionName},
+    MessageSpec{T::kWorldState, "world_state", "operator site", false, false, ValidateWorldState},
+    MessageSpec{T::kWorksiteScene, "worksite_scene", "work site", false, false, ValidateWorksiteScene},
 };
 
 // The catalogue is indexed by the enum's value.

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <algorithm>
 #include <variant>
 
 namespace teachsim::robot {
@@ -40,6 +41,8 @@ const char* CommandStatusName(CommandStatus status) {
       return "refused";
     case CommandStatus::kSkipped:
       return "skipped";
+    case CommandStatus::kStopped:
+      return "stopped";
   }
   return "?";
 }
@@ -50,6 +53,14 @@ Status MonitorOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(Positive("MonitorOptions", "verify_window_s", verify_window_s));
   if (verify_window_s > settle_time_s) {
     return Status::InvalidInput("MonitorOptions::verify_window_s must not exceed settle_time_s");
+  }
+  if (!(probe_depth_scale > 0 && probe_depth_scale <= 4)) {
+    return Status::InvalidInput("MonitorOptions::probe_depth_scale = " + json::FormatNumber(probe_depth_scale) +
+                                " must be in (0, 4]");
+  }
+  if (!(unexplained_force_n >= 0)) {
+    return Status::InvalidInput("MonitorOptions::unexplained_force_n = " + json::FormatNumber(unexplained_force_n) +
+                                " must be >= 0");
   }
   if (!(friction_bound >= 0 && friction_bound < 1)) {
     return Status::InvalidInput("MonitorOptions::friction_bound = " + json::FormatNumber(friction_bound) +
@@ -72,6 +83,10 @@ Status ControllerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(Positive("ControllerOptions", "gripper_timeout_s", gripper_timeout_s));
   TEACHSIM_RETURN_IF_ERROR(Positive("ControllerOptions", "gripper_tolerance_m", gripper_tolerance_m));
   if (!(grip_squeeze_m >= 0)) return Status::InvalidInput("ControllerOptions::grip_squeeze_m must be >= 0");
+  if (!(stop_time_s > 0 && stop_time_s <= 0.1)) {
+    return Status::InvalidInput("ControllerOptions::stop_time_s = " + json::FormatNumber(stop_time_s) +
+                                " must be in (0, 0.1]");
+  }
   return Status::Ok();
 }
 
@@ -217,9 +232,15 @@ Status TaskController::Load(std::vector<Phase> phases, std::vector<std::string> 
       report_.commands[i].forces.reserve(static_cast<std::size_t>(seconds / options_.cycle_s) + 16);
     }
   }
-  window_sums_.assign(max_normals, 0.0);
+  (void)max_normals;
+  window_force_.setZero();
+  window_samples_ = 0;
+  probe_stage_ = ProbeStage::kNone;
   const Joints q = io.ReadJoints();
   setpoint_ = q;
+  last_step_.setZero();
+  stop_requested_ = false;
+  stop_cycles_left_ = -1;
   payload_n_ = MeasuredTool(q).Rotate(io.ReadWristWrench().force_n);  // tare (at rest, touching nothing)
   phase_ = 0;
   phase_started_ = false;
@@ -251,16 +272,21 @@ Status TaskController::BeginPhase(double t_s) {
                                        names_[ph.command], nullptr));
     line_ = CartesianLine(start, ph.goal, l);
     admittance_ = AdmittanceState{};
-    std::fill(window_sums_.begin(), window_sums_.end(), 0.0);
+    window_force_.setZero();
     window_samples_ = 0;
+    probe_stage_ = ProbeStage::kNone;
+    probe_queue_.clear();
+    probe_queue_.reserve(static_cast<std::size_t>(ph.impedance ? ph.impedance->normals.cols() : 0));
   }
   return Status::Ok();
 }
 
-void TaskController::EndProgram(RobotIo& io, const Joints& q, CommandStatus status,
+void TaskController::EndProgram(RobotIo& io, const Joints& hold, CommandStatus status,
                                 const std::string& message, double t_s) {
-  setpoint_ = q;
-  io.CommandJoints(q);  // hold where the arm is
+  setpoint_ = hold;
+  last_step_.setZero();
+  io.CommandJoints(hold);  // hold there
+  const Joints& q = hold;
   CommandReport& rep = report_.commands[phases_[phase_].command];
   rep.status = status;
   rep.message = message;
@@ -273,9 +299,42 @@ void TaskController::EndProgram(RobotIo& io, const Joints& q, CommandStatus stat
   }
   report_.finished = true;
   report_.success = false;
+  report_.stopped = status == CommandStatus::kStopped;
   report_.message = "commands[" + std::to_string(phases_[phase_].command) + "] (" + rep.type + ") " +
                     CommandStatusName(status) + ": " + message;
   running_ = false;
+}
+
+void TaskController::RequestStop() {
+  if (running_) stop_requested_ = true;
+}
+
+// One cycle of a controlled stop: the setpoint keeps moving by its last step, shrinking linearly
+// to zero over stop_time_s (uniform deceleration); then it holds until the measured joints are at
+// rest (or 0.1 s after the request), and the program ends there.
+bool TaskController::StopCycle(RobotIo& io, const Joints& q, double t_s) {
+  const int n = std::max(1, static_cast<int>(std::lround(options_.stop_time_s / options_.cycle_s)));
+  if (stop_cycles_left_ < 0) {
+    stop_cycles_left_ = n;
+    stop_step_ = last_step_;
+    stop_t0_ = t_s;
+    stop_last_q_ = q;
+  }
+  if (stop_cycles_left_ > 0) {
+    --stop_cycles_left_;
+    setpoint_ += stop_step_ * (static_cast<double>(stop_cycles_left_) / (n + 1));
+  }
+  io.CommandJoints(setpoint_);
+  // At rest: no joint moved more than 2e-5 rad in the last cycle (< 1 mm/s at the tool here).
+  const bool at_rest = (q - stop_last_q_).cwiseAbs().maxCoeff() < 2e-5;
+  stop_last_q_ = q;
+  const double elapsed = t_s - stop_t0_;
+  if (stop_cycles_left_ > 0 || (!at_rest && elapsed + 1e-9 < 0.1 - options_.cycle_s)) return true;
+  EndProgram(io, setpoint_, CommandStatus::kStopped,
+             at_rest ? Format("stopped on request, at rest after %.2f s", elapsed + options_.cycle_s)
+                     : Format("stopped on request, still settling after %.2f s", elapsed + options_.cycle_s),
+             t_s);
+  return false;
 }
 
 void TaskController::FinishPhase(RobotIo& io, const Joints& q, const Wrench& wrench,
@@ -316,6 +375,54 @@ void TaskController::FinishPhase(RobotIo& io, const Joints& q, const Wrench& wre
   (void)io;
 }
 
+ContactCheck TaskController::CheckContact(const ImpedanceSpec& imp, long n, const Eigen::Vector3d& mean_force,
+                                         bool probed) const {
+  ContactCheck check;
+  check.normal = imp.normals.col(n);
+  check.threshold_n = imp.force_thresholds_n[static_cast<std::size_t>(n)];
+  check.force_n = mean_force.dot(check.normal);
+  const NormalForceBound bound = MinNormalForce(mean_force, imp.normals, options_.monitor.friction_bound, n);
+  check.min_normal_n = bound.min_n;
+  check.friction_allowance_n = std::max(0.0, check.force_n - bound.min_n);
+  check.unexplained_n = bound.outside_n;
+  check.probed = probed;
+  check.verified =
+      check.min_normal_n >= check.threshold_n && check.unexplained_n <= options_.monitor.unexplained_force_n;
+  return check;
+}
+
+std::string TaskController::DescribeCheck(const ContactCheck& c) const {
+  std::string text = Format("%.2f N along (%.2f, %.2f, ", c.force_n, c.normal.x(), c.normal.y()) +
+                     Format("%.2f), at least %.2f N certified with friction", c.normal.z(), c.min_normal_n) +
+                     Format(" %.2f, needed %.2f N", options_.monitor.friction_bound, c.threshold_n);
+  if (c.unexplained_n > options_.monitor.unexplained_force_n) {
+    text += Format(" (%.2f N of the force is explained by no contact of the program)", c.unexplained_n);
+  }
+  if (c.probed) text += " (probed alone)";
+  return text;
+}
+
+// Presses contact n alone: the target is the nominal one moved d into contact n only (the other
+// contacts at their nominal surfaces), d being the program's bias depth along n.
+void TaskController::BeginProbe(const Phase& ph, long n, double t_s) {
+  const ImpedanceSpec& imp = ph.impedance.value();
+  const double depth = -imp.normals.col(n).dot(imp.bias_m) * options_.monitor.probe_depth_scale;
+  Eigen::VectorXd depths = Eigen::VectorXd::Zero(imp.normals.cols());
+  depths[n] = depth;
+  const Eigen::Matrix3Xd& N = imp.normals;
+  const Eigen::MatrixXd gram = N.transpose() * N;
+  const Eigen::Vector3d delta = -N * gram.ldlt().solve(depths);
+  geometry::Pose3 goal = ph.nominal;
+  goal.translation += delta;
+  MotionLimits l = options_.limits;
+  l.speed_mps = ph.speed_mps;
+  line_ = CartesianLine(line_.goal(), goal, l);
+  phase_t0_ = t_s;
+  window_force_.setZero();
+  window_samples_ = 0;
+  probe_stage_ = ProbeStage::kProbe;
+}
+
 bool TaskController::Cycle(RobotIo& io, double t_s) {
   if (!running_) return false;
   const Joints q = io.ReadJoints();
@@ -347,8 +454,11 @@ bool TaskController::Cycle(RobotIo& io, double t_s) {
     return false;
   }
 
+  if (stop_requested_) return StopCycle(io, q, t_s);
+
   const double elapsed = t_s - phase_t0_;
   if (ph.kind == Phase::Kind::kGripper) {
+    last_step_.setZero();
     io.CommandJoints(setpoint_);
     const bool stopped = !gripper.moving && elapsed >= 2 * options_.cycle_s;
     if (!stopped && elapsed < options_.gripper_timeout_s) return true;
@@ -382,6 +492,7 @@ bool TaskController::Cycle(RobotIo& io, double t_s) {
   const double along = elapsed + options_.cycle_s;
   if (ph.guard && force.dot(ph.guard->direction) >= ph.guard->force_n) {
     setpoint_ = q;  // stop where the contact was felt
+    last_step_.setZero();
     io.CommandJoints(q);
     rep.guard_triggered = true;
     rep.message =
@@ -414,6 +525,7 @@ bool TaskController::Cycle(RobotIo& io, double t_s) {
       return false;
     }
   }
+  last_step_ = ik->q - setpoint_;
   setpoint_ = ik->q;
   io.CommandJoints(setpoint_);
   if (along < line_.duration_s()) return true;
@@ -422,36 +534,51 @@ bool TaskController::Cycle(RobotIo& io, double t_s) {
   if (ph.impedance) {
     const ImpedanceSpec& imp = ph.impedance.value();
     const long k = imp.normals.cols();
+    if (probe_stage_ == ProbeStage::kRestore) {  // back to the biased target after probing
+      FinishPhase(io, q, wrench, gripper, t_s);
+      return running_;
+    }
     if (after >= options_.monitor.settle_time_s - options_.monitor.verify_window_s) {
-      for (long n = 0; n < k; ++n) window_sums_[static_cast<std::size_t>(n)] += force.dot(imp.normals.col(n));
+      window_force_ += force;
       ++window_samples_;
     }
     if (after < options_.monitor.settle_time_s) return true;
-    // Verdict (paper §6.2): the force along each normal must exceed its threshold, after the
-    // allowance for friction at the other contacts.
+    const Eigen::Vector3d mean_force = window_force_ / std::max(window_samples_, 1);
+    if (probe_stage_ == ProbeStage::kProbe) {
+      // This probe's verdict replaces the in-place one of its contact; then the next probe.
+      const long n = probe_queue_[probe_next_ - 1];
+      rep.contacts[static_cast<std::size_t>(n)] = CheckContact(imp, n, mean_force, true);
+      if (probe_next_ < probe_queue_.size()) {
+        BeginProbe(ph, probe_queue_[probe_next_++], t_s);
+        return true;
+      }
+      rep.contacts_verified = true;
+      std::string unverified;
+      for (const ContactCheck& c : rep.contacts) {
+        rep.contacts_verified = rep.contacts_verified && c.verified;
+        if (!c.verified) unverified += (unverified.empty() ? "" : "; ") + DescribeCheck(c);
+      }
+      rep.message = rep.contacts_verified ? "contacts verified (probed one at a time)"
+                                          : "contact not verified: " + unverified;
+      // Back to the biased target (every contact pressed), the state the program asked for.
+      MotionLimits l = options_.limits;
+      l.speed_mps = ph.speed_mps;
+      line_ = CartesianLine(line_.goal(), ph.goal, l);
+      phase_t0_ = t_s;
+      probe_stage_ = ProbeStage::kRestore;
+      return true;
+    }
+    // Verdict in place (paper §6.2): a certified normal force above the threshold on every
+    // contact, friction at all of them considered (MonitorOptions::friction_bound).
     rep.contacts.clear();
     rep.contacts_verified = true;
     std::string unverified;
+    probe_queue_.clear();
     for (long n = 0; n < k; ++n) {
-      ContactCheck check;
-      check.normal = imp.normals.col(n);
-      check.threshold_n = imp.force_thresholds_n[static_cast<std::size_t>(n)];
-      check.force_n = window_sums_[static_cast<std::size_t>(n)] / std::max(window_samples_, 1);
-      for (long m = 0; m < k; ++m) {
-        if (m == n) continue;
-        const double other =
-            std::max(0.0, window_sums_[static_cast<std::size_t>(m)] / std::max(window_samples_, 1));
-        check.friction_allowance_n +=
-            options_.monitor.friction_bound * other * check.normal.cross(imp.normals.col(m)).norm();
-      }
-      check.verified = check.force_n - check.friction_allowance_n >= check.threshold_n;
+      ContactCheck check = CheckContact(imp, n, mean_force, false);
       if (!check.verified) {
-        unverified +=
-            (unverified.empty() ? "" : "; ") +
-            Format("%.1f N along (%.2f, %.2f, ", check.force_n, check.normal.x(), check.normal.y()) +
-            Format("%.2f)", check.normal.z()) +
-            Format(" (friction allowance %.1f N), needed %.1f N", check.friction_allowance_n,
-                   check.threshold_n);
+        unverified += (unverified.empty() ? "" : "; ") + DescribeCheck(check);
+        if (check.unexplained_n <= options_.monitor.unexplained_force_n) probe_queue_.push_back(n);
       }
       rep.contacts_verified = rep.contacts_verified && check.verified;
       rep.contacts.push_back(check);
@@ -463,6 +590,16 @@ bool TaskController::Cycle(RobotIo& io, double t_s) {
                         options_.contact_reach_tolerance_m * 1e3),
                  t_s);
       return false;
+    }
+    // Friction makes several simultaneous contacts ambiguous (a corner with mu = 0.5 can read
+    // the same with one wall untouched): press the doubtful ones one at a time, the others
+    // relieved, so that little friction can hide behind them.
+    if (!rep.contacts_verified && options_.monitor.probe && k >= 2 &&
+        probe_queue_.size() == static_cast<std::size_t>(std::count_if(rep.contacts.begin(), rep.contacts.end(),
+                                                                   [](const ContactCheck& c) { return !c.verified; }))) {
+      probe_next_ = 0;
+      BeginProbe(ph, probe_queue_[probe_next_++], t_s);
+      return true;
     }
     rep.message = rep.contacts_verified ? "contacts verified" : "contact not verified: " + unverified;
     FinishPhase(io, q, wrench, gripper, t_s);
@@ -496,6 +633,9 @@ json::Json ExecutionReportToJson(const ExecutionReport& report, bool with_forces
                           {"threshold_n", k.threshold_n},
                           {"force_n", k.force_n},
                           {"friction_allowance_n", k.friction_allowance_n},
+                          {"min_normal_n", k.min_normal_n},
+                          {"unexplained_n", k.unexplained_n},
+                          {"probed", k.probed},
                           {"verified", k.verified}});
     }
     json::Json entry = {{"index", i},

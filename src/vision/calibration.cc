@@ -1,5 +1,7 @@
 #include "teachsim/vision/calibration.h"
 
+#include <Eigen/Dense>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -283,8 +285,69 @@ json::Json PointCorrespondencesToJson(const std::vector<PointCorrespondence>& po
   return {{"points", list}};
 }
 
+Status ExtrinsicsOptions::Validate() const {
+  if (!(click_sigma_px > 0) || !std::isfinite(click_sigma_px)) {
+    return Status::InvalidInput("extrinsics: click sigma must be > 0 px, got " +
+                                json::FormatNumber(click_sigma_px));
+  }
+  return Status::Ok();
+}
+
+Result<Eigen::Matrix3d> PredictedPositionCovariance(const Camera& camera,
+                                                    const std::vector<Eigen::Vector3d>& points_in_world,
+                                                    double sigma_px) {
+  if (!(sigma_px > 0) || !std::isfinite(sigma_px)) {
+    return Status::InvalidInput("extrinsics: pixel sigma must be > 0 px, got " +
+                                json::FormatNumber(sigma_px));
+  }
+  if (points_in_world.size() < 3) {
+    return Status::InvalidInput("extrinsics: the pose needs at least 3 points, got " +
+                                std::to_string(points_in_world.size()));
+  }
+  // Parameters: the camera position in the world (m) and a rotation increment in the camera frame
+  // (rad). The position block of the inverse information does not depend on how rotation is
+  // parameterized. Central differences: the projection is smooth, and a step of 1e-6 keeps both the
+  // truncation and the rounding error far below 1e-6 of the derivative.
+  const double step = 1e-6;
+  const geometry::Pose3& pose = camera.world_T_camera();
+  auto moved = [&](int k, double h) {
+    Eigen::Vector3d dp = Eigen::Vector3d::Zero(), dw = Eigen::Vector3d::Zero();
+    (k < 3 ? dp : dw)(k % 3) = h;
+    const Eigen::Quaterniond q =
+        pose.rotation *
+        Eigen::Quaterniond(Eigen::AngleAxisd(
+            dw.norm(), dw.norm() > 0 ? Eigen::Vector3d(dw.normalized()) : Eigen::Vector3d::UnitX()));
+    return Camera(camera.intrinsics(), camera.distortion(),
+                  geometry::Pose3(q.normalized(), pose.translation + dp), camera.width(), camera.height());
+  };
+  Eigen::MatrixXd jacobian(2 * static_cast<Eigen::Index>(points_in_world.size()), 6);
+  for (int k = 0; k < 6; ++k) {
+    const Camera plus = moved(k, step), minus = moved(k, -step);
+    for (std::size_t i = 0; i < points_in_world.size(); ++i) {
+      const auto a = plus.Project(points_in_world[i]), b = minus.Project(points_in_world[i]);
+      if (!a || !b) {
+        return Status::InvalidInput("extrinsics: point " + std::to_string(i) + " lies behind the camera");
+      }
+      jacobian.block<2, 1>(2 * static_cast<Eigen::Index>(i), k) = (*a - *b) / (2 * step);
+    }
+  }
+  const Eigen::Matrix<double, 6, 6> information = jacobian.transpose() * jacobian;
+  const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(information);
+  // Relative to the largest eigenvalue: a rank-deficient set (collinear points) has an information
+  // matrix whose smallest eigenvalue is rounding noise.
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> eigen(information);
+  if (ldlt.info() != Eigen::Success || eigen.eigenvalues()(0) <= 1e-12 * eigen.eigenvalues()(5)) {
+    return Status::InvalidInput("extrinsics: the points do not determine the camera's pose (collinear?)");
+  }
+  const Eigen::Matrix<double, 6, 6> covariance =
+      sigma_px * sigma_px * ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity());
+  return Eigen::Matrix3d(covariance.topLeftCorner<3, 3>());
+}
+
 Result<ExtrinsicsResult> CalibrateExtrinsics(const Camera& camera,
-                                             const std::vector<PointCorrespondence>& points) {
+                                             const std::vector<PointCorrespondence>& points,
+                                             const ExtrinsicsOptions& options) {
+  TEACHSIM_RETURN_IF_ERROR(options.Validate());
   if (points.size() < 4) {
     return Status::InvalidInput("extrinsics: needs at least 4 points, got " + std::to_string(points.size()));
   }
@@ -326,6 +389,12 @@ Result<ExtrinsicsResult> CalibrateExtrinsics(const Camera& camera,
     sum += r * r;
   }
   result.rms_px = std::sqrt(sum / static_cast<double>(points.size()));
+  std::vector<Eigen::Vector3d> in_world;
+  for (const PointCorrespondence& p : points) in_world.push_back(p.p_in_world);
+  auto covariance = PredictedPositionCovariance(solved, in_world, options.click_sigma_px);
+  if (!covariance.ok()) return covariance.status();
+  result.position_covariance_m2 = *covariance;
+  result.position_sigma_m = std::sqrt(covariance->trace());
   return result;
 }
 

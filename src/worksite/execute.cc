@@ -9,8 +9,24 @@ namespace teachsim::worksite {
 
 robot::ControllerOptions WorksiteControllerOptions() {
   robot::ControllerOptions options;
-  options.monitor.friction_bound = 0;
+  options.monitor.friction_bound = 0.5;  // the block friction is drawn from 0.1-0.5
   return options;
+}
+
+const char* ExecutionStateName(ExecutionState state) {
+  switch (state) {
+    case ExecutionState::kRunning:
+      return "running";
+    case ExecutionState::kStopping:
+      return "stopping";
+    case ExecutionState::kStopped:
+      return "stopped";
+    case ExecutionState::kSucceeded:
+      return "succeeded";
+    case ExecutionState::kFailed:
+      return "failed";
+  }
+  return "?";
 }
 
 Status ExecuteOptions::Validate() const {
@@ -100,13 +116,34 @@ Result<ExecuteResult> Execute(const scene::Scene& operator_scene, const robot::R
   };
   double t_s = 0;
   result.cycle_us.reserve(static_cast<std::size_t>(120.0 / cycle_s));
+  ExecuteTick tick;
+  tick.command_count = program.commands.size();
+  tick.world = &io;
   while (true) {
+    if (options.stop_requested && !controller.stopping() && options.stop_requested()) controller.RequestStop();
     const auto c0 = Clock::now();
     const bool running = controller.Cycle(io, t_s);
     result.cycle_us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - c0).count());
     report_progress(false);
-    if (!running) break;
-    if (t_s > options.max_time_s) break;
+    const bool timed_out = running && t_s > options.max_time_s;
+    if (options.on_tick) {
+      const robot::ExecutionReport& r = controller.report();
+      tick.t_s = t_s;
+      tick.command = controller.current_command();
+      tick.command_type = r.commands[tick.command].type;
+      tick.command_status = r.commands[tick.command].status;
+      tick.force_n = controller.last_force_n().norm();
+      if (running && !timed_out) {
+        tick.state = controller.stopping() ? ExecutionState::kStopping : ExecutionState::kRunning;
+      } else if (r.stopped) {
+        tick.state = ExecutionState::kStopped;
+      } else {
+        tick.state = r.success ? ExecutionState::kSucceeded : ExecutionState::kFailed;
+      }
+      options.on_tick(tick);
+    }
+    if (!running || timed_out) break;
+    if (options.pace) options.pace(t_s);
     io.Advance(cycle_s);
     t_s += cycle_s;
   }
@@ -121,6 +158,7 @@ Result<ExecuteResult> Execute(const scene::Scene& operator_scene, const robot::R
         "the program did not finish within " + json::FormatNumber(options.max_time_s) + " s";
   }
   result.success = result.report.success;
+  result.stopped = result.report.stopped;
   result.message = result.report.message;
   result.final_world_T_workpiece = io.ObjectPose(program.workpiece);
   result.has_intent = IntendedWorkpiecePose(program, &result.intended_world_T_workpiece);
@@ -149,6 +187,7 @@ json::Json ExecuteResultToJson(const ExecuteResult& result, const ExecuteOptions
   }
   doc["format"] = "teachsim-execution-report";
   doc["success"] = result.success;
+  doc["stopped"] = result.stopped;
   doc["message"] = result.message;
   bool all_contacts = true;
   for (const robot::CommandReport& c : result.report.commands)

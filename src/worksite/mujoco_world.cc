@@ -90,6 +90,46 @@ void EmitGeoms(const scene::ShapeSpec& spec, const geometry::Pose3& body_T_shape
 
 std::string BodyName(std::size_t i) { return "object_" + std::to_string(i); }
 
+// The convex part of one robot geom for the renderer, in the geom's frame (MuJoCo sizes are half
+// sizes; capsules and cylinders lie along z).
+std::shared_ptr<const geometry::ConvexPolyhedron> GeomConvex(int type, const mjtNum* size) {
+  std::vector<Eigen::Vector3d> points;
+  if (type == mjGEOM_BOX) {
+    auto box = geometry::ConvexPolyhedron::Box(2 * Eigen::Vector3d(size[0], size[1], size[2]));
+    TEACHSIM_CHECK(box.ok());
+    return std::make_shared<const geometry::ConvexPolyhedron>(std::move(box).value());
+  }
+  if (type == mjGEOM_CYLINDER) {
+    for (int k = 0; k < 16; ++k) {
+      const double a = 2 * M_PI * k / 16;
+      for (double z : {-size[1], size[1]}) points.emplace_back(size[0] * std::cos(a), size[0] * std::sin(a), z);
+    }
+  } else if (type == mjGEOM_CAPSULE) {
+    // Two hemispheres of two latitude rings and a pole each, around the segment's ends.
+    const double r = size[0], h = size[1];
+    for (double end : {-1.0, 1.0}) {
+      points.emplace_back(0, 0, end * (h + r));
+      for (double lat : {0.0, M_PI / 4}) {
+        for (int k = 0; k < 12; ++k) {
+          const double a = 2 * M_PI * (k + (lat > 0 ? 0.5 : 0.0)) / 12;
+          points.emplace_back(r * std::cos(lat) * std::cos(a), r * std::cos(lat) * std::sin(a),
+                              end * (h + r * std::sin(lat)));
+        }
+      }
+    }
+  } else {
+    return nullptr;  // the robot has no other geom types
+  }
+  auto hull = geometry::ConvexPolyhedron::Hull(points);
+  TEACHSIM_CHECK(hull.ok());
+  return std::make_shared<const geometry::ConvexPolyhedron>(std::move(hull).value());
+}
+
+geometry::Pose3 PoseOf(const mjtNum* pos, const mjtNum* quat) {
+  return {Eigen::Quaterniond(quat[0], quat[1], quat[2], quat[3]).normalized(),
+          Eigen::Vector3d(pos[0], pos[1], pos[2])};
+}
+
 }  // namespace
 
 Status MujocoWorldOptions::Validate() const {
@@ -117,6 +157,10 @@ Status MujocoWorldOptions::Validate() const {
                                 " must be >= 0");
   }
   if (!(settle_s >= 0)) return Status::InvalidInput("MujocoWorldOptions::settle_s must be >= 0");
+  if (noslip_iterations < 0 || noslip_iterations > 1000) {
+    return Status::InvalidInput("MujocoWorldOptions::noslip_iterations = " + std::to_string(noslip_iterations) +
+                                " must be in [0, 1000]");
+  }
   if (contact_timeconst_s < 2 * timestep_s || pad_timeconst_s < 2 * timestep_s) {
     return Status::InvalidInput("MujocoWorldOptions::contact_timeconst_s must be at least two timesteps");
   }
@@ -211,7 +255,7 @@ Result<std::string> BuildMjcf(const scene::Scene& scene, const robot::RobotModel
   // z axis (theta_i = q_i + offset commutes with TransZ(d_i)). Links are light (their weight
   // is the servos' business) and do not collide: they stay above and outside the work area.
   const auto frames = robot::LinkFrames(model, robot::Joints::Zero());
-  const std::string link_geom = "contype=\"0\" conaffinity=\"0\" group=\"1\" rgba=\"0.85 0.85 0.9 1\"";
+  const std::string link_geom = "contype=\"0\" conaffinity=\"0\" group=\"1\" rgba=\"0.25 0.25 0.27 1\"";
   std::ostringstream arm;
   arm << "    <body name=\"robot_base\" " << PoseAttrs(scene.robot->world_T_base) << ">\n";
   arm << "      <geom type=\"cylinder\" size=\"0.08 " << Num(model.base_height_m() / 2) << "\" pos=\"0 0 "
@@ -271,7 +315,8 @@ Result<std::string> BuildMjcf(const scene::Scene& scene, const robot::RobotModel
   x << "<mujoco model=\"teachsim_worksite\">\n"
     << "  <compiler angle=\"radian\" inertiafromgeom=\"true\"/>\n"
     << "  <option timestep=\"" << Num(options.timestep_s)
-    << "\" gravity=\"0 0 -9.81\" integrator=\"Euler\" cone=\"elliptic\" impratio=\"5\"/>\n"
+    << "\" gravity=\"0 0 -9.81\" integrator=\"Euler\" cone=\"elliptic\" impratio=\"5\" noslip_iterations=\""
+    << options.noslip_iterations << "\"/>\n"
     << "  <size njmax=\"1000\" nconmax=\"400\"/>\n"
     << "  <default>\n    <geom " << solref << " " << solimp << " margin=\"0\"/>\n  </default>\n"
     << "  <asset>\n"
@@ -343,6 +388,24 @@ Result<std::unique_ptr<MujocoWorld>> MujocoWorld::Create(const scene::Scene& sce
   h.tool_site = mj_name2id(h.model, mjOBJ_SITE, "tool");
   for (std::size_t i = 0; i < scene.objects.size(); ++i) {
     h.object_bodies.emplace_back(scene.objects[i].name, mj_name2id(h.model, mjOBJ_BODY, BodyName(i).c_str()));
+  }
+  // The renderer's view of the world: the scene's objects, then the robot's bodies and their geoms.
+  w->scene_objects_ = ObjectsFromScene(scene);
+  const int first_robot_body = mj_name2id(h.model, mjOBJ_BODY, "robot_base");
+  for (int b = first_robot_body; b >= 0 && b < h.model->nbody; ++b) {
+    RobotBody rb;
+    rb.body = b;
+    const char* name = mj_id2name(h.model, mjOBJ_BODY, b);
+    rb.object.name = std::string(std::strncmp(name, "robot_", 6) == 0 ? "" : "robot_") + name;
+    rb.object.model = "robot";
+    rb.object.material = Material::kFlat;
+    rb.object.albedo = 0.18;  // dark grey arm and gripper
+    for (int g = h.model->body_geomadr[b]; g >= 0 && g < h.model->body_geomadr[b] + h.model->body_geomnum[b]; ++g) {
+      auto convex = GeomConvex(h.model->geom_type[g], h.model->geom_size + 3 * g);
+      if (!convex) continue;
+      rb.object.parts.push_back({convex, PoseOf(h.model->geom_pos + 3 * g, h.model->geom_quat + 4 * g)});
+    }
+    if (!rb.object.parts.empty()) w->robot_bodies_.push_back(std::move(rb));
   }
 
   const robot::Joints q0 = start ? *start : model.ready_rad;
@@ -440,6 +503,44 @@ geometry::Pose3 MujocoWorld::TrueToolPose() const {
   Eigen::Matrix3d m;
   m << R[0], R[1], R[2], R[3], R[4], R[5], R[6], R[7], R[8];
   return {Eigen::Quaterniond(m).normalized(), Eigen::Vector3d(p[0], p[1], p[2])};
+}
+
+std::vector<RenderObject> MujocoWorld::RenderObjects() const {
+  std::vector<RenderObject> out = scene_objects_;
+  for (std::size_t i = 0; i < out.size() && i < mj_->object_bodies.size(); ++i) {
+    const int body = mj_->object_bodies[i].second;
+    out[i].world_T_object = PoseOf(mj_->data->xpos + 3 * body, mj_->data->xquat + 4 * body);
+  }
+  for (const RobotBody& rb : robot_bodies_) {
+    out.push_back(rb.object);
+    out.back().world_T_object = PoseOf(mj_->data->xpos + 3 * rb.body, mj_->data->xquat + 4 * rb.body);
+  }
+  return out;
+}
+
+std::string MujocoWorld::DescribeContacts() const {
+  std::string out;
+  const mjModel* m = mj_->model;
+  const mjData* d = mj_->data;
+  auto body_name = [&](int geom) {
+    const int body = m->geom_bodyid[geom];
+    for (const auto& [object, id] : mj_->object_bodies) {
+      if (id == body) return object;
+    }
+    const char* name = mj_id2name(m, mjOBJ_BODY, body);
+    return std::string(name ? name : "?");
+  };
+  for (int c = 0; c < d->ncon; ++c) {
+    const mjContact& con = d->contact[c];
+    mjtNum f6[6];
+    mj_contactForce(m, d, c, f6);
+    char line[300];
+    std::snprintf(line, sizeof line, "%s - %s: normal %.2f N, friction %.2f N, depth %.2f mm, normal (%.2f, %.2f, %.2f)\n",
+                  body_name(con.geom1).c_str(), body_name(con.geom2).c_str(), f6[0], std::hypot(f6[1], f6[2]),
+                  -con.dist * 1e3, con.frame[0], con.frame[1], con.frame[2]);
+    out += line;
+  }
+  return out;
 }
 
 Eigen::Vector3d MujocoWorld::ContactForceOn(const std::string& name) const {

@@ -45,6 +45,22 @@ Json Example(MessageType type) {
     case MessageType::kConsoleOutput: return {{"text", "selected cube45"}, {"ok", true}, {"in_reply_to", 9}};
     case MessageType::kSessionSave:
     case MessageType::kSessionLoad: return {{"name", "corner-demo_1"}};
+    case MessageType::kWorldState:
+      return {{"revision", 4},
+              {"objects", {{{"name", "cube"}, {"fixed", false}, {"model", "cube45"},
+                            {"shape", {{"box", {0.045, 0.045, 0.045}}}}, {"world_T_object", kPose},
+                            {"origin", "scene"}}}},
+              {"workpiece", "cube"}, {"capture", {"frame"}}, {"dragging", false}, {"demonstrations", 1},
+              {"models", {{{"name", "cube45"}, {"shape", {{"box", {0.045, 0.045, 0.045}}}}}}},
+              {"cameras", Json::array()}, {"robot", nullptr},
+              {"link", {{"state", "up"}, {"stopped", false}, {"reason", "connected"}, {"rtt_s", nullptr}}},
+              {"lease_holder", 1}, {"busy", ""},
+              {"paths", {{"initial", {kPose, kPose}}, {"deformed", Json::array()}, {"simplified", Json::array()}}},
+              {"program", {{"id", "p1"}, {"command_count", 3}, {"listing", "1 grasp"}}},
+              {"report", nullptr}, {"sim_rate_hz", 60.5}};
+    case MessageType::kWorksiteScene:
+      return {{"scene", {{"objects", Json::array()}}},
+              {"models", {{{"name", "cube45"}, {"shape", {{"box", {0.045, 0.045, 0.045}}}}}}}};
     case MessageType::kCameraFrame: break;
   }
   return Json();

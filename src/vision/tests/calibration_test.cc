@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Dense>
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -17,22 +19,92 @@ Camera PuzzleCamera() {
   return *camera;
 }
 
-// Work-site features of known position in the default scene: the table's far corner and five
-// corners of the frame's walls (their bounding box: the walls stand on the table).
-std::vector<Eigen::Vector3d> KnownPoints() {
+// Work-site features of known position in the default scene, all visible from camera "main": the
+// one table corner in the image and corners of the frame's walls (their bounding box `lo`..`hi` and
+// the inner rectangle, a wall thickness inside it; the walls stand on the table).
+struct SceneFeatures {
+  Eigen::Vector3d table_corner;  // the table top's -x -y corner
+  Eigen::Vector3d lo, hi;        // the walls' outer bounds
+  double wall = 0;               // wall thickness
+};
+
+SceneFeatures Features() {
   auto scene = scene::LoadScene(std::string(TEACHSIM_SOURCE_DIR) + "/scenes/puzzle.json");
   EXPECT_TRUE(scene.ok());
   const scene::SceneObject& table = scene->objects.at(static_cast<std::size_t>(scene->FindObject("table")));
   const scene::SceneObject& frame = scene->objects.at(static_cast<std::size_t>(scene->FindObject("frame")));
   geometry::Aabb walls;
+  double wall = 1e9;
   for (const geometry::ShapePart& part : frame.shape.parts()) {
     const geometry::Aabb b = part.convex->WorldBounds(frame.world_T_object * part.shape_T_part);
-    if (std::abs(b.min.z()) < 1e-6) walls.Extend(b);
+    if (std::abs(b.min.z()) < 1e-6) {
+      walls.Extend(b);
+      wall = std::min(wall, (b.max - b.min).minCoeff());
+    }
   }
   const geometry::Aabb t = table.shape.WorldBounds(table.world_T_object);
-  const Eigen::Vector3d lo = walls.min, hi = walls.max;
-  return {{t.min.x(), t.min.y(), t.max.z()}, {lo.x(), lo.y(), hi.z()}, {hi.x(), lo.y(), hi.z()},
-          {hi.x(), hi.y(), hi.z()},          {lo.x(), hi.y(), hi.z()}, {hi.x(), hi.y(), lo.z()}};
+  return {{t.min.x(), t.min.y(), t.max.z()}, walls.min, walls.max, wall};
+}
+
+// The six points docs/formats/camera.md recommends: the table corner, three outer top corners of
+// the walls (not the one beside the table corner in the image) and the two inner top corners on
+// the other diagonal. Of all 6-sets of these features, near the best-conditioned (Cramer-Rao
+// bound 2.17 mm RMS at 0.5 px vs 2.14 for the best, which needs a floor corner blocks may hide).
+std::vector<Eigen::Vector3d> RecommendedPoints() {
+  const SceneFeatures f = Features();
+  const Eigen::Vector3d lo = f.lo, hi = f.hi;
+  return {f.table_corner,
+          {hi.x(), lo.y(), hi.z()},
+          {lo.x(), hi.y(), hi.z()},
+          {hi.x(), hi.y(), hi.z()},
+          {hi.x() - f.wall, lo.y() + f.wall, hi.z()},
+          {lo.x() + f.wall, hi.y() - f.wall, hi.z()}};
+}
+
+// The six points session 1 used: the table corner, the four outer top corners and one outer
+// bottom corner (2.48 mm RMS bound).
+std::vector<Eigen::Vector3d> FirstSessionPoints() {
+  const SceneFeatures f = Features();
+  const Eigen::Vector3d lo = f.lo, hi = f.hi;
+  return {f.table_corner,           {lo.x(), lo.y(), hi.z()}, {hi.x(), lo.y(), hi.z()},
+          {hi.x(), hi.y(), hi.z()}, {lo.x(), hi.y(), hi.z()}, {hi.x(), hi.y(), lo.z()}};
+}
+
+struct ErrorStats {
+  double rms_mm = 0, median_mm = 0, p95_mm = 0, max_mm = 0;
+  Eigen::Matrix3d covariance_m2 = Eigen::Matrix3d::Zero();  // about the truth
+};
+
+// Solves the pose from `draws` noisy copies of the true projections of `world` and summarizes the
+// camera position's error. `noise` draws one pixel-coordinate error.
+template <typename Noise>
+ErrorStats PositionErrors(const Camera& truth, const std::vector<Eigen::Vector3d>& world, int draws,
+                          std::mt19937& rng, Noise noise) {
+  std::vector<double> errors_mm;
+  ErrorStats stats;
+  for (int draw = 0; draw < draws; ++draw) {
+    std::vector<PointCorrespondence> points;
+    for (std::size_t i = 0; i < world.size(); ++i) {
+      auto pixel = truth.Project(world[i]);
+      EXPECT_TRUE(pixel.has_value() && truth.InImage(*pixel));
+      const double du = noise(rng), dv = noise(rng);
+      points.push_back({"point " + std::to_string(i), *pixel + Eigen::Vector2d(du, dv), world[i]});
+    }
+    auto result = CalibrateExtrinsics(truth, points);
+    EXPECT_TRUE(result.ok()) << result.status().message();
+    if (!result.ok()) return stats;
+    // No wrong minimum (the rotation error is about position error / 0.7 m: a few mrad).
+    EXPECT_LT(geometry::RotationAngle(result->world_T_camera, truth.world_T_camera()), 0.03);
+    const Eigen::Vector3d error = result->world_T_camera.translation - truth.world_T_camera().translation;
+    stats.covariance_m2 += error * error.transpose() / draws;
+    errors_mm.push_back(error.norm() * 1e3);
+  }
+  std::sort(errors_mm.begin(), errors_mm.end());
+  stats.rms_mm = std::sqrt(stats.covariance_m2.trace()) * 1e3;
+  stats.median_mm = errors_mm[errors_mm.size() / 2];
+  stats.p95_mm = errors_mm[errors_mm.size() * 95 / 100];
+  stats.max_mm = errors_mm.back();
+  return stats;
 }
 
 TEST(ChessboardSpecTest, ParsesAndValidates) {
@@ -89,45 +161,78 @@ TEST(CalibrationTest, RecoversIntrinsicsFromNoisyCorners) {
   EXPECT_NE(few.status().message().find("need at least 5"), std::string::npos) << few.status().message();
 }
 
-// The operator clicks six features of known position (a table corner and five frame corners) at
-// whole pixels, i.e. with up to 0.5 px of error per coordinate; PnP recovers the camera within 2 mm.
-// (With Gaussian click noise of sigma 0.5 px the RMS error is about 2.5 mm for this geometry: the
-// Cramer-Rao limit of six points 300 px apart at 0.7 m, not a solver matter.)
-TEST(CalibrationTest, RecoversCameraPoseFromSixKnownPoints) {
+// Six features of known position, clicked with Gaussian noise of sigma 0.5 px per coordinate, over
+// 1000 seeded draws. The least-squares pose (SQPnP + LM) attains the Cramer-Rao bound that
+// CalibrateExtrinsics predicts from its Jacobian: the camera position's RMS error matches the
+// predicted sigma, axis by axis. The bound itself is the limit: 2.17 mm RMS for the recommended
+// six points (2.48 mm for session 1's), so "within 2 mm" at sigma 0.5 px needs sub-pixel clicks or
+// more points (docs/formats/camera.md).
+TEST(CalibrationTest, CameraPositionErrorMatchesPredictedUncertainty) {
   const Camera truth = PuzzleCamera();
-  const std::vector<Eigen::Vector3d> corners = KnownPoints();
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<double> noise(-0.5, 0.5);
-  double sum_mm2 = 0;
-  const int trials = 50;
-  for (int trial = 0; trial < trials; ++trial) {
-    std::vector<PointCorrespondence> points;
-    for (std::size_t i = 0; i < corners.size(); ++i) {
-      auto pixel = truth.Project(corners[i]);
-      ASSERT_TRUE(pixel.has_value());
-      ASSERT_TRUE(truth.InImage(*pixel));
-      points.push_back(
-          {"corner " + std::to_string(i), *pixel + Eigen::Vector2d(noise(rng), noise(rng)), corners[i]});
-    }
-    auto result = CalibrateExtrinsics(truth, points);
-    ASSERT_TRUE(result.ok()) << result.status().message();
-    const double error_mm =
-        (result->world_T_camera.translation - truth.world_T_camera().translation).norm() * 1e3;
-    sum_mm2 += error_mm * error_mm;
-    EXPECT_LT(result->rms_px, 0.6);
-    EXPECT_LT(geometry::RotationAngle(result->world_T_camera, truth.world_T_camera()), 0.01);
-  }
-  const double rms_mm = std::sqrt(sum_mm2 / trials);
-  std::printf("camera position error, RMS over %d trials: %.2f mm\n", trials, rms_mm);
-  EXPECT_LT(rms_mm, 2.0);
+  const int draws = 1000;
+  for (const auto& [label, world] :
+       {std::pair<std::string, std::vector<Eigen::Vector3d>>{"recommended", RecommendedPoints()},
+        {"session 1", FirstSessionPoints()}}) {
+    SCOPED_TRACE(label);
+    // The prediction at the true pose (noise-free clicks solve to it exactly).
+    std::vector<PointCorrespondence> exact;
+    for (const Eigen::Vector3d& p : world) exact.push_back({"", *truth.Project(p), p});
+    auto solved = CalibrateExtrinsics(truth, exact);
+    ASSERT_TRUE(solved.ok()) << solved.status().message();
+    EXPECT_LT((solved->world_T_camera.translation - truth.world_T_camera().translation).norm(), 1e-6);
+    EXPECT_LT(solved->rms_px, 1e-6);
+    const Eigen::Matrix3d predicted = solved->position_covariance_m2;
 
-  // Noise-free clicks give the exact pose.
-  std::vector<PointCorrespondence> exact;
-  for (const Eigen::Vector3d& p : corners) exact.push_back({"", *truth.Project(p), p});
-  auto result = CalibrateExtrinsics(truth, exact);
-  ASSERT_TRUE(result.ok());
-  EXPECT_LT((result->world_T_camera.translation - truth.world_T_camera().translation).norm(), 1e-6);
-  EXPECT_LT(result->rms_px, 1e-6);
+    std::mt19937 rng(11);
+    std::normal_distribution<double> gaussian(0, 0.5);
+    const ErrorStats stats = PositionErrors(truth, world, draws, rng, gaussian);
+    std::printf(
+        "%s points, sigma 0.5 px, %d draws: position error RMS %.2f mm (predicted %.2f), "
+        "median %.2f, p95 %.2f, max %.2f mm\n",
+        label.c_str(), draws, stats.rms_mm, solved->position_sigma_m * 1e3, stats.median_mm, stats.p95_mm,
+        stats.max_mm);
+    EXPECT_NEAR(stats.rms_mm / (solved->position_sigma_m * 1e3), 1.0, 0.08);
+    // Along each principal axis of the prediction (variances estimated from 1000 draws: +-4.5 %).
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> axes(predicted);
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d axis = axes.eigenvectors().col(k);
+      EXPECT_NEAR(axis.dot(stats.covariance_m2 * axis) / axes.eigenvalues()(k), 1.0, 0.2) << "axis " << k;
+    }
+  }
+  // The recommended set is better conditioned than session 1's.
+  auto recommended = PredictedPositionCovariance(truth, RecommendedPoints(), 0.5);
+  auto first = PredictedPositionCovariance(truth, FirstSessionPoints(), 0.5);
+  ASSERT_TRUE(recommended.ok() && first.ok());
+  EXPECT_LT(std::sqrt(recommended->trace()), 0.9 * std::sqrt(first->trace()));
+}
+
+// The operator clicks the recommended points at whole pixels (error up to +-0.5 px, sigma 0.29 px):
+// the camera position is within 2 mm RMS and within 1.5 mm in half the draws.
+TEST(CalibrationTest, RecoversCameraPoseFromSixWholePixelClicks) {
+  const Camera truth = PuzzleCamera();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> rounding(-0.5, 0.5);
+  const ErrorStats stats = PositionErrors(truth, RecommendedPoints(), 1000, rng, rounding);
+  std::printf(
+      "recommended points at whole pixels, 1000 draws: RMS %.2f, median %.2f, p95 %.2f, max %.2f mm\n",
+      stats.rms_mm, stats.median_mm, stats.p95_mm, stats.max_mm);
+  EXPECT_LT(stats.rms_mm, 2.0);
+  EXPECT_LT(stats.median_mm, 1.5);
+}
+
+// The prediction scales with the click noise and refuses point sets that fix no pose.
+TEST(CalibrationTest, PredictedPositionCovarianceValidates) {
+  const Camera truth = PuzzleCamera();
+  auto half = PredictedPositionCovariance(truth, RecommendedPoints(), 0.5);
+  auto one = PredictedPositionCovariance(truth, RecommendedPoints(), 1.0);
+  ASSERT_TRUE(half.ok() && one.ok());
+  EXPECT_NEAR(one->trace() / half->trace(), 4.0, 1e-6);
+  const std::vector<Eigen::Vector3d> collinear{{0, 0, 0}, {0.05, 0, 0}, {0.1, 0, 0}, {0.15, 0, 0}};
+  EXPECT_FALSE(PredictedPositionCovariance(truth, collinear, 0.5).ok());
+  EXPECT_FALSE(PredictedPositionCovariance(truth, RecommendedPoints(), 0).ok());
+  std::vector<PointCorrespondence> points;
+  for (const Eigen::Vector3d& p : RecommendedPoints()) points.push_back({"", *truth.Project(p), p});
+  EXPECT_FALSE(CalibrateExtrinsics(truth, points, ExtrinsicsOptions{-1}).ok());
 }
 
 TEST(CalibrationTest, PointFilesAreValidated) {

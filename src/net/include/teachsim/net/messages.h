@@ -50,6 +50,8 @@ enum class MessageType : std::uint8_t {
   kConsoleOutput,
   kSessionSave,
   kSessionLoad,
+  kWorldState,     // operator -> browser: the whole operator state (docs/protocol.md)
+  kWorksiteScene,  // work site -> operator: its nominal scene and model library
 };
 
 // One row of the catalogue.

@@ -16,6 +16,7 @@
 #include "teachsim/base/status.h"
 #include "teachsim/geometry/pose.h"
 #include "teachsim/robot/admittance.h"
+#include "teachsim/robot/friction.h"
 #include "teachsim/robot/kinematics.h"
 #include "teachsim/robot/program.h"
 #include "teachsim/robot/robot_io.h"
@@ -29,10 +30,23 @@ struct MonitorOptions {
   double force_limit_n = 50;     // any contact force above this aborts the program (safety)
   double settle_time_s = 0.5;    // contact moves: impedance keeps running this long after the trajectory
   double verify_window_s = 0.1;  // ...and the force along each normal is judged over its last part
-  // Friction at the other contacts adds up to mu * (their normal force) * |n_i x n_j| along a normal
-  // n_i (a block slid into a corner reads the table's friction along the wall's normal); the
-  // monitor subtracts that allowance before comparing with the threshold. 0: the paper's plain check.
+  // Coulomb friction assumed at every contact, at most (wood on wood; the work site draws its
+  // block friction from 0.1-0.5). Friction at the other contacts reads along a contact's normal
+  // (a block slid into a corner reads the table's friction along the wall's normal), so a
+  // contact is verified when the SMALLEST normal force consistent with the measured force and
+  // friction up to this (MinNormalForce, friction.h) reaches the threshold. 0: the paper's plain
+  // check of the force along each normal.
   double friction_bound = 0.5;
+  // A force that no contact of the program explains (its distance from the friction cones' sum)
+  // above this means something else touches: not verified, and no probing.
+  double unexplained_force_n = 0.5;
+  // When several contacts cannot all be certified in place, press each doubtful one alone (the
+  // bias along the others removed), settle and judge it again; then return to the biased target.
+  bool probe = true;
+  // The probe presses its contact this many times the program's bias depth: the other contacts,
+  // relieved, still carry what the model error presses into them, and their friction is then a
+  // smaller share of the probed force.
+  double probe_depth_scale = 2.0;
   bool stop_on_unverified = true;  // an unverified contact ends the program (it failed)
   bool record_forces = true;       // per-command force history in the report
   [[nodiscard]] Status Validate() const;
@@ -51,18 +65,24 @@ struct ControllerOptions {
   double gripper_timeout_s = 3.0;
   double gripper_tolerance_m = 0.003;  // a grasp holds when the jaws stop this close to the block width
   double grip_squeeze_m = 0.005;       // close this much narrower than the block to squeeze it
+  // A requested stop (RequestStop) brings the setpoint to rest over this long (at most 0.1 s),
+  // decelerating uniformly from its last speed, then holds it.
+  double stop_time_s = 0.05;
   [[nodiscard]] Status Validate() const;
 };
 
-enum class CommandStatus { kPending, kRunning, kReached, kNotReached, kAborted, kRefused, kSkipped };
+enum class CommandStatus { kPending, kRunning, kReached, kNotReached, kAborted, kRefused, kSkipped, kStopped };
 const char* CommandStatusName(CommandStatus status);
 
 struct ContactCheck {
   Eigen::Vector3d normal = Eigen::Vector3d::Zero();
   double threshold_n = 0;
   double force_n = 0;               // mean force along the normal over the verification window
-  double friction_allowance_n = 0;  // subtracted before the comparison (MonitorOptions::friction_bound)
-  bool verified = false;
+  double min_normal_n = 0;          // the normal force certified despite friction (friction.h)
+  double friction_allowance_n = 0;  // force_n - min_normal_n: what friction may account for
+  double unexplained_n = 0;         // force explained by no contact of the program
+  bool probed = false;              // judged while pressed alone (MonitorOptions::probe)
+  bool verified = false;            // min_normal_n >= threshold_n, unexplained_n within bounds
 };
 
 struct ForceSample {
@@ -87,6 +107,7 @@ struct CommandReport {
 struct ExecutionReport {
   bool finished = false;
   bool success = false;  // every command reached and every contact verified
+  bool stopped = false;  // ended by RequestStop (a controlled stop, not a failure of the task)
   std::string message;
   double peak_force_n = 0;
   std::vector<CommandReport> commands;
@@ -127,7 +148,17 @@ class TaskController {
   // One control cycle at time t_s: read, compute, command. Returns true while running.
   bool Cycle(RobotIo& io, double t_s);
 
+  // Controlled stop, e.g. an operator's request: from the next cycle on the setpoint decelerates
+  // to rest within ControllerOptions::stop_time_s and holds there (the gripper keeps its
+  // command, so a held block stays held); once the measured joints are at rest (at most 0.1 s
+  // after the request) the command running ends `stopped`, the rest are skipped. No effect when
+  // not running.
+  void RequestStop();
+  bool stopping() const { return stop_requested_; }
+
   bool running() const { return running_; }
+  // The command running now (or the last one run); 0 before Start.
+  std::size_t current_command() const { return phases_.empty() ? 0 : phases_[std::min(phase_, phases_.size() - 1)].command; }
   const ExecutionReport& report() const { return report_; }
   const AdmittanceState& admittance() const { return admittance_; }
   // The force on the tool in the world frame with the payload removed, as of the last cycle.
@@ -156,7 +187,11 @@ class TaskController {
   Status BeginPhase(double t_s);
   void FinishPhase(RobotIo& io, const Joints& q, const Wrench& wrench, const GripperState& gripper,
                    double t_s);
-  void EndProgram(RobotIo& io, const Joints& q, CommandStatus status, const std::string& message, double t_s);
+  void EndProgram(RobotIo& io, const Joints& hold, CommandStatus status, const std::string& message, double t_s);
+  bool StopCycle(RobotIo& io, const Joints& q, double t_s);
+  ContactCheck CheckContact(const ImpedanceSpec& imp, long n, const Eigen::Vector3d& mean_force, bool probed) const;
+  std::string DescribeCheck(const ContactCheck& check) const;
+  void BeginProbe(const Phase& ph, long n, double t_s);
   geometry::Pose3 MeasuredTool(const Joints& q) const;
 
   const RobotModel& model_;
@@ -170,9 +205,18 @@ class TaskController {
   double phase_t0_ = 0;
   CartesianLine line_;
   Joints setpoint_ = Joints::Zero();
+  Joints last_step_ = Joints::Zero();  // setpoint change of the last cycle (the stop decelerates it)
+  bool stop_requested_ = false;
+  int stop_cycles_left_ = -1;  // -1: the stop ramp has not begun
+  Joints stop_step_ = Joints::Zero();
+  Joints stop_last_q_ = Joints::Zero();
+  double stop_t0_ = 0;
   AdmittanceState admittance_;
-  std::vector<double> window_sums_;  // per contact normal: sum of force along it over the window
+  Eigen::Vector3d window_force_ = Eigen::Vector3d::Zero();  // sum of the force over the verify window
   int window_samples_ = 0;
+  enum class ProbeStage { kNone, kProbe, kRestore } probe_stage_ = ProbeStage::kNone;
+  std::vector<long> probe_queue_;  // contacts to press alone, in order
+  std::size_t probe_next_ = 0;
   Eigen::Vector3d payload_n_ = Eigen::Vector3d::Zero();  // tare: what the sensor reads at rest, world
   Eigen::Vector3d last_force_ = Eigen::Vector3d::Zero();
   bool running_ = false;

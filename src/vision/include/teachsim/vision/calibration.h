@@ -94,15 +94,37 @@ struct PointCorrespondence {
                                                                                  const std::string& name);
 json::Json PointCorrespondencesToJson(const std::vector<PointCorrespondence>& points);
 
+struct ExtrinsicsOptions {
+  // The assumed click noise: independent Gaussian, per pixel coordinate. Only the predicted
+  // uncertainty depends on it, not the solution.
+  double click_sigma_px = 0.5;
+  [[nodiscard]] Status Validate() const;
+};
+
 struct ExtrinsicsResult {
   geometry::Pose3 world_T_camera;
   double rms_px = 0;
   std::vector<double> residuals_px;  // per point, in input order
+  // The camera position's predicted covariance (world frame, m^2) for options.click_sigma_px, from
+  // the Jacobian at the solution (PredictedPositionCovariance), and its RMS error sqrt(trace), m.
+  Eigen::Matrix3d position_covariance_m2 = Eigen::Matrix3d::Zero();
+  double position_sigma_m = 0;
 };
 
 // The camera's pose from >= 4 correspondences and the camera's intrinsics and distortion: SQPnP for
-// a global start, then Levenberg-Marquardt refinement of the reprojection error.
+// a global start, then Levenberg-Marquardt refinement of the reprojection error (the maximum-
+// likelihood pose for Gaussian click noise; it attains the predicted covariance below).
 [[nodiscard]] Result<ExtrinsicsResult> CalibrateExtrinsics(const Camera& camera,
-                                                           const std::vector<PointCorrespondence>& points);
+                                                           const std::vector<PointCorrespondence>& points,
+                                                           const ExtrinsicsOptions& options = {});
+
+// The Cramer-Rao bound on the camera position (world frame, m^2) when `points_in_world` are seen by
+// `camera` (at its pose) with independent Gaussian pixel noise of sigma_px per coordinate:
+// sigma^2 (J^T J)^-1 restricted to the position, J the Jacobian of the distorted projections with
+// respect to the camera's position and orientation. Lets one compare candidate point sets without
+// images. Fails when a point does not project or the pose is not determined (too few points, or
+// points in a degenerate configuration).
+[[nodiscard]] Result<Eigen::Matrix3d> PredictedPositionCovariance(
+    const Camera& camera, const std::vector<Eigen::Vector3d>& points_in_world, double sigma_px);
 
 }  // namespace teachsim::vision

@@ -20,11 +20,32 @@
 
 namespace teachsim::worksite {
 
-// The controller as the work site runs it: the robot module's defaults except the monitor's
-// friction allowance, which is 0 (the paper's plain check, §6.2). With the allowance at 0.5 a
-// corner (three orthogonal contacts, each pressed with K d) can never verify: the allowance along
-// each normal, 0.5 (K d + K d), equals the force itself (measured: 1.0-1.3 N read, 1.4-1.6 N allowed).
+// The controller as the work site runs it: the robot module's defaults, with the monitor
+// assuming friction up to 0.5 at every contact (the world draws its block friction from 0.1-0.5).
 robot::ControllerOptions WorksiteControllerOptions();
+
+// Where an execution stands, after each controller cycle (ExecuteOptions::on_tick).
+enum class ExecutionState {
+  kRunning,    // the program runs
+  kStopping,   // a stop was requested: the arm decelerates (ControllerOptions::stop_time_s)
+  kStopped,    // it came to rest and holds (the program did not finish)
+  kSucceeded,  // every command reached, every contact verified
+  kFailed,     // a command failed, was refused or aborted, or the time ran out
+};
+const char* ExecutionStateName(ExecutionState state);  // "running", "stopping", ...
+
+struct ExecuteTick {
+  double t_s = 0;                 // simulated, since the program started
+  std::size_t command = 0;        // the command running now (or the last one run)
+  std::size_t command_count = 0;  // in the program
+  std::string command_type;       // "grasp", "move", "contact_move", ...
+  robot::CommandStatus command_status = robot::CommandStatus::kPending;
+  ExecutionState state = ExecutionState::kRunning;
+  double force_n = 0;  // magnitude of the force on the tool as the controller read it this cycle
+  // The simulated world as of this cycle (RenderObjects() for camera frames, ground truth).
+  // Valid during the call only; never give it to the controller.
+  const MujocoWorld* world = nullptr;
+};
 
 struct ExecuteOptions {
   robot::ControllerOptions controller = WorksiteControllerOptions();
@@ -32,12 +53,22 @@ struct ExecuteOptions {
   std::optional<ModelError> model_error;  // none: the world is the operator's scene
   double max_time_s = 600;                // simulated; a program still running then has failed
   double report_sample_period_s = 0.05;   // force history in the report, downsampled
+  // Hooks for a service driving the execution (all optional, called on Execute's thread):
+  // after every controller cycle (100 Hz simulated), including the last one (state final);
+  std::function<void(const ExecuteTick&)> on_tick;
+  // checked every cycle: true asks for a controlled stop (decelerate, hold within 0.1 s
+  // simulated; the result is `stopped`);
+  std::function<bool()> stop_requested;
+  // called every cycle with the simulated time since the program started, before the physics
+  // advances: a caller that wants real time sleeps here until its wall clock reaches t_s.
+  std::function<void(double t_s)> pace;
   [[nodiscard]] Status Validate() const;
 };
 
 struct ExecuteResult {
   robot::ExecutionReport report;  // the controller's (per command status, contacts, forces)
   bool success = false;
+  bool stopped = false;  // ended by ExecuteOptions::stop_requested (then success is false)
   std::string message;
   double block_friction = 0;  // of the simulated world
   // The program's intent: the last move / contact move target while holding, composed with the grasp.

@@ -11,12 +11,14 @@
 #include <memory>
 #include <random>
 #include <string>
+#include <vector>
 
 #include "teachsim/base/status.h"
 #include "teachsim/geometry/pose.h"
 #include "teachsim/robot/robot_io.h"
 #include "teachsim/robot/robot_model.h"
 #include "teachsim/scene/scene.h"
+#include "teachsim/worksite/render.h"
 
 namespace teachsim::worksite {
 
@@ -29,6 +31,11 @@ struct MujocoWorldOptions {
   // block neither sinks into the table nor jitters on it.
   double contact_timeconst_s = 0.004;
   double contact_dampratio = 1.0;
+  // MuJoCo's friction is soft: a held block creeps in the jaws under any sustained load (here
+  // 0.2 mm/s under the 1.5 N of a biased contact move: 3 mm over the around-corner program,
+  // which ate the bias and failed its verification). The no-slip pass makes static friction
+  // hold, as rubber pads squeezing at 7.5-15 N do against a few newtons. 0: MuJoCo's default.
+  int noslip_iterations = 10;
   // The finger pads are rubber: their contacts are softer (they dominate the pair's solref), which
   // also stands for the compliance of a real wrist sensor between the stiff arm and the world.
   double pad_timeconst_s = 0.015;
@@ -96,6 +103,15 @@ class MujocoWorld : public robot::RobotIo {
   geometry::Pose3 ObjectPose(const std::string& name) const;      // a scene object's body
   geometry::Pose3 TrueToolPose() const;                           // the tool site, world
   Eigen::Vector3d ContactForceOn(const std::string& name) const;  // sum of contact forces on its geoms, world
+  // What the work site's camera sees now (issue 6: "of the MuJoCo world, robot included"): the
+  // scene's objects at their simulated poses (materials and grain as ObjectsFromScene gives
+  // them), then the robot: one dark grey object per arm link ("robot_base", "robot_link_1" ...
+  // "robot_link_6", "robot_gripper", "robot_finger_left", "robot_finger_right"), capsules and
+  // cylinders as 12- and 16-sided hulls. For Renderer::Render.
+  std::vector<RenderObject> RenderObjects() const;
+  // Every active contact, one line each: the two bodies, the normal force and the friction (N),
+  // the penetration (mm). For people debugging a program on the work site.
+  std::string DescribeContacts() const;
   long steps() const { return steps_; }
   double timestep_s() const { return options_.timestep_s; }
   const std::string& mjcf() const { return mjcf_; }
@@ -105,6 +121,12 @@ class MujocoWorld : public robot::RobotIo {
   std::unique_ptr<MjHandles> mj_;
   MujocoWorldOptions options_;
   std::string mjcf_;
+  std::vector<RenderObject> scene_objects_;  // the simulated world's scene, poses as at Create
+  struct RobotBody {
+    int body = 0;
+    RenderObject object;  // parts in the body frame; world_T_object set per call
+  };
+  std::vector<RobotBody> robot_bodies_;
   robot::Joints from_ = robot::Joints::Zero(), to_ = robot::Joints::Zero();
   int interpolation_step_ = 0, interpolation_steps_ = 10;
   long steps_ = 0;

@@ -1,0 +1,364 @@
+#include "teachsim/vision/evaluate.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <filesystem>
+
+
+namespace teachsim::vision {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kRadToDeg = 180.0 / 3.14159265358979323846;
+
+// The table's top is z = 0; its extent covers any work area the benchmark uses.
+constexpr double kTableSideM = 1.2, kTableThicknessM = 0.04;
+
+// The pose fields of an entry that holds other fields too.
+geometry::Pose3 ReadEmbeddedPose(const json::Reader& r) {
+  const json::Json pose{{"position", r.At("position").raw()}, {"quaternion_wxyz", r.At("quaternion_wxyz").raw()}};
+  try {
+    return geometry::ReadPose(json::Reader(pose));
+  } catch (const json::ParseError& e) {
+    r.Fail(e.what());
+  }
+}
+
+TruthObject ReadTruthObject(const json::Reader& o, const std::map<std::string, Eigen::Vector3d>& sizes) {
+  o.RejectUnknownKeys({"name", "model", "dims", "position", "quaternion_wxyz", "visible_fraction",
+                       "visible_pixels"});
+  TruthObject t;
+  t.name = o.At("name").NonEmptyString();
+  t.model = o.At("model").NonEmptyString();
+  const auto size = sizes.find(t.model);
+  if (size == sizes.end()) o.At("model").Fail("model \"" + t.model + "\" is not in \"models\"");
+  if (auto dims = o.Find("dims")) {
+    const Eigen::Vector3d d = dims->Vector3();
+    if ((d - size->second).cwiseAbs().maxCoeff() > 1e-9) {
+      dims->Fail("must equal the model's sizes [" + json::FormatNumber(size->second.x()) + ", " +
+                 json::FormatNumber(size->second.y()) + ", " + json::FormatNumber(size->second.z()) + "]");
+    }
+  }
+  t.world_T_object = ReadEmbeddedPose(o);
+  t.visible_fraction = o.At("visible_fraction").NumberInRange(0.0, 1.0);
+  t.visible_pixels = static_cast<int>(o.At("visible_pixels").IntegerInRange(0, 1LL << 30));
+  return t;
+}
+
+FrameTruth ReadFrame(const json::Reader& f) {
+  f.RejectUnknownKeys({"position", "quaternion_wxyz", "inner", "wall", "height"});
+  FrameTruth frame;
+  frame.world_T_frame = ReadEmbeddedPose(f);
+  const json::Reader inner = f.At("inner");
+  inner.ExpectSize(2);
+  frame.inner_m = Eigen::Vector2d(inner.Index(0).NumberGreaterThan(0.0), inner.Index(1).NumberGreaterThan(0.0));
+  frame.wall_m = f.At("wall").NumberGreaterThan(0.0);
+  frame.height_m = f.At("height").NumberGreaterThan(0.0);
+  return frame;
+}
+
+TruthSet ReadTruthSet(const json::Reader& r, const std::filesystem::path& folder) {
+  r.RejectUnknownKeys({"units", "world", "models", "frame_model", "cases"});
+  TruthSet set;
+  const json::Reader models = r.At("models");
+  if (!models.IsObject()) models.Fail("must be an object {model: [x, y, z]}");
+  for (const std::string& name : models.Keys()) {
+    const json::Reader size = models.At(name);
+    const Eigen::Vector3d s = size.Vector3();
+    if (s.minCoeff() <= 0) size.Fail("box sides must be > 0");
+    set.model_sizes_m[name] = s;
+  }
+  const json::Reader cases = r.At("cases");
+  for (std::size_t i = 0; i < cases.Size(); ++i) {
+    const json::Reader c = cases.Index(i);
+    c.RejectUnknownKeys({"image", "camera", "frame", "objects", "noise_sigma"});
+    TruthCase tc;
+    const std::filesystem::path image = c.At("image").NonEmptyString();
+    tc.image = (image.is_absolute() ? image : folder / image).string();
+    tc.camera = scene::ReadCamera(c.At("camera"));
+    if (auto frame = c.Find("frame")) tc.frame = ReadFrame(*frame);
+    const json::Reader objects = c.At("objects");
+    for (std::size_t j = 0; j < objects.Size(); ++j) {
+      tc.objects.push_back(ReadTruthObject(objects.Index(j), set.model_sizes_m));
+    }
+    set.cases.push_back(std::move(tc));
+  }
+  return set;
+}
+
+// Nearest-rank quantile of sorted values.
+double Quantile(const std::vector<double>& sorted, double q) {
+  const auto rank = static_cast<std::size_t>(std::ceil(q * static_cast<double>(sorted.size())));
+  return sorted[std::clamp<std::size_t>(rank, 1, sorted.size()) - 1];
+}
+
+json::Json StatsToJson(const Stats& s) {
+  auto number = [](double v) { return std::isfinite(v) ? json::Json(v) : json::Json(nullptr); };
+  return {{"count", s.count}, {"median", number(s.median)}, {"p90", number(s.p90)}, {"max", number(s.max)}};
+}
+
+}  // namespace
+
+std::vector<Eigen::Quaterniond> BoxSymmetries(const Eigen::Vector3d& size_m, double tolerance_m) {
+  std::vector<Eigen::Quaterniond> group;
+  std::array<int, 3> perm = {0, 1, 2};
+  do {
+    for (int signs = 0; signs < 8; ++signs) {
+      // Column j of the matrix maps object axis j onto axis perm[j] with a sign.
+      Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
+      bool keeps_sizes = true;
+      for (int j = 0; j < 3; ++j) {
+        m(perm[static_cast<std::size_t>(j)], j) = (signs >> j & 1) != 0 ? -1.0 : 1.0;
+        keeps_sizes = keeps_sizes && std::abs(size_m[j] - size_m[perm[static_cast<std::size_t>(j)]]) <= tolerance_m;
+      }
+      if (!keeps_sizes || m.determinant() < 0) continue;
+      group.emplace_back(m);
+    }
+  } while (std::next_permutation(perm.begin(), perm.end()));
+  // The identity permutation with no sign flips is generated first.
+  TEACHSIM_CHECK(group.front().isApprox(Eigen::Quaterniond::Identity()));
+  return group;
+}
+
+double SymmetricRotationError(const Eigen::Quaterniond& world_R_truth, const Eigen::Quaterniond& world_R_estimate,
+                              const std::vector<Eigen::Quaterniond>& symmetries) {
+  double best = 3.14159265358979323846;
+  const Eigen::Quaterniond estimate_R_truth = world_R_estimate.conjugate() * world_R_truth;
+  for (const Eigen::Quaterniond& s : symmetries) {
+    const Eigen::Quaterniond d = (estimate_R_truth * s).normalized();
+    // angle = 2 atan2(|v|, |w|): exact near 0 and near pi (acos of w is not).
+    best = std::min(best, 2.0 * std::atan2(d.vec().norm(), std::abs(d.w())));
+  }
+  return best;
+}
+
+PositionError SplitPositionError(const Eigen::Vector3d& truth_in_world, const Eigen::Vector3d& estimate_in_world,
+                                 const Eigen::Vector3d& camera_centre_in_world) {
+  const Eigen::Vector3d sight = (truth_in_world - camera_centre_in_world).normalized();
+  const Eigen::Vector3d e = estimate_in_world - truth_in_world;
+  const double along = e.dot(sight);
+  return {(e - along * sight).norm(), std::abs(along)};
+}
+
+Result<TruthSet> LoadTruthSet(const std::string& path) {
+  TEACHSIM_ASSIGN_OR_RETURN(const json::Json document, json::ReadFile(path));
+  const std::filesystem::path folder = std::filesystem::absolute(path).parent_path();
+  return json::Decode<TruthSet>(document, path, [&](const json::Reader& r) { return ReadTruthSet(r, folder); });
+}
+
+scene::Scene FixedWorldScene(const std::optional<FrameTruth>& frame) {
+  scene::Scene world;
+  world.objects.push_back(scene::BoxObject(
+      "table", true, Eigen::Vector3d(kTableSideM, kTableSideM, kTableThicknessM),
+      geometry::Pose3::Translation(Eigen::Vector3d(0, 0, -kTableThicknessM / 2))));
+  if (frame.has_value()) {
+    const double w = frame->wall_m, h = frame->height_m, ix = frame->inner_m.x(), iy = frame->inner_m.y();
+    scene::SceneObject object;
+    object.name = "frame";
+    object.fixed = true;
+    object.shape_spec.kind = scene::ShapeSpec::Kind::kParts;
+    auto wall = [&](const Eigen::Vector3d& size, const Eigen::Vector3d& centre) {
+      scene::ShapeSpec::Part part;
+      part.shape.kind = scene::ShapeSpec::Kind::kBox;
+      part.shape.box_size = size;
+      part.pose = geometry::Pose3::Translation(centre);
+      object.shape_spec.parts.push_back(part);
+    };
+    // Long walls along x over the whole outer length, short walls along y between them.
+    wall({ix + 2 * w, w, h}, {0, (iy + w) / 2, h / 2});
+    wall({ix + 2 * w, w, h}, {0, -(iy + w) / 2, h / 2});
+    wall({w, iy, h}, {(ix + w) / 2, 0, h / 2});
+    wall({w, iy, h}, {-(ix + w) / 2, 0, h / 2});
+    auto shape = scene::BuildShape(object.shape_spec);
+    TEACHSIM_CHECK_MSG(shape.ok(), "frame walls must have positive sizes");
+    object.shape = std::move(shape).value();
+    object.world_T_object = frame->world_T_frame;
+    world.objects.push_back(std::move(object));
+  }
+  return world;
+}
+
+Status MatchOptions::Validate() const {
+  auto positive = [](double v, const char* name) {
+    return std::isfinite(v) && v > 0 ? Status::Ok()
+                                     : Status::InvalidInput(std::string("MatchOptions::") + name + " = " +
+                                                            json::FormatNumber(v) + " must be > 0");
+  };
+  TEACHSIM_RETURN_IF_ERROR(positive(max_across_m, "max_across_m"));
+  TEACHSIM_RETURN_IF_ERROR(positive(max_along_m, "max_along_m"));
+  TEACHSIM_RETURN_IF_ERROR(positive(max_rotation_rad, "max_rotation_rad"));
+  if (!(min_visible_fraction >= 0 && min_visible_fraction < 1)) {
+    return Status::InvalidInput("MatchOptions::min_visible_fraction = " + json::FormatNumber(min_visible_fraction) +
+                                " must be in [0, 1)");
+  }
+  return Status::Ok();
+}
+
+Result<ImageEvaluation> EvaluateImage(const std::vector<TruthObject>& truth, const std::vector<Detection>& detections,
+                                      const std::map<std::string, Eigen::Vector3d>& model_sizes_m,
+                                      const Eigen::Vector3d& camera_centre_in_world, const MatchOptions& options) {
+  TEACHSIM_RETURN_IF_ERROR(options.Validate());
+  std::vector<std::vector<Eigen::Quaterniond>> symmetries;
+  for (const TruthObject& t : truth) {
+    const auto size = model_sizes_m.find(t.model);
+    if (size == model_sizes_m.end()) {
+      return Status::InvalidInput("truth object \"" + t.name + "\": model \"" + t.model + "\" has no box size");
+    }
+    symmetries.push_back(BoxSymmetries(size->second));
+  }
+  ImageEvaluation out;
+  std::vector<int> outcome_of(truth.size(), -1);
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    if (truth[i].visible_fraction < options.min_visible_fraction || truth[i].visible_pixels <= 0) continue;
+    outcome_of[i] = static_cast<int>(out.objects.size());
+    ObjectOutcome o;
+    o.truth = static_cast<int>(i);
+    o.visible_fraction = truth[i].visible_fraction;
+    out.objects.push_back(o);
+  }
+  std::vector<int> order(detections.size());
+  for (std::size_t d = 0; d < order.size(); ++d) order[d] = static_cast<int>(d);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return detections[static_cast<std::size_t>(a)].score > detections[static_cast<std::size_t>(b)].score;
+  });
+  out.detection_truth.assign(detections.size(), -1);
+  std::vector<bool> taken(truth.size(), false);
+  for (int d : order) {
+    const Detection& det = detections[static_cast<std::size_t>(d)];
+    int best = -1;
+    double best_cost = 0, best_rotation = 0;
+    PositionError best_error;
+    for (std::size_t i = 0; i < truth.size(); ++i) {
+      if (taken[i] || truth[i].model != det.model) continue;
+      const double rotation = SymmetricRotationError(truth[i].world_T_object.rotation, det.world_T_object.rotation,
+                                                     symmetries[i]);
+      const PositionError e = SplitPositionError(truth[i].world_T_object.translation,
+                                                 det.world_T_object.translation, camera_centre_in_world);
+      if (rotation > options.max_rotation_rad || e.across_m > options.max_across_m || e.along_m > options.max_along_m) {
+        continue;
+      }
+      const double cost =
+          rotation / options.max_rotation_rad + e.across_m / options.max_across_m + e.along_m / options.max_along_m;
+      if (best < 0 || cost < best_cost) {
+        best = static_cast<int>(i);
+        best_cost = cost;
+        best_rotation = rotation;
+        best_error = e;
+      }
+    }
+    if (best < 0) {
+      ++out.false_positives;
+      continue;
+    }
+    taken[static_cast<std::size_t>(best)] = true;
+    const int outcome = outcome_of[static_cast<std::size_t>(best)];
+    if (outcome < 0) {
+      out.detection_truth[static_cast<std::size_t>(d)] = -2;
+      continue;
+    }
+    out.detection_truth[static_cast<std::size_t>(d)] = best;
+    ObjectOutcome& o = out.objects[static_cast<std::size_t>(outcome)];
+    o.detection = d;
+    o.rotation_error_rad = best_rotation;
+    o.position_error = best_error;
+    o.reprojection_rms_px = det.reprojection_rms_px;
+  }
+  return out;
+}
+
+Stats Summarize(std::vector<double> values) {
+  values.erase(std::remove_if(values.begin(), values.end(), [](double v) { return !std::isfinite(v); }),
+               values.end());
+  Stats s;
+  s.count = static_cast<int>(values.size());
+  if (values.empty()) return s;
+  std::sort(values.begin(), values.end());
+  s.median = values.size() % 2 == 1 ? values[values.size() / 2]
+                                    : 0.5 * (values[values.size() / 2 - 1] + values[values.size() / 2]);
+  s.p90 = Quantile(values, 0.9);
+  s.max = values.back();
+  return s;
+}
+
+VisibilityBin BinOf(double visible_fraction) {
+  if (visible_fraction >= 0.7) return VisibilityBin::kHigh;
+  if (visible_fraction >= 0.4) return VisibilityBin::kMedium;
+  return VisibilityBin::kLow;
+}
+
+const char* BinName(VisibilityBin bin) {
+  switch (bin) {
+    case VisibilityBin::kHigh:
+      return ">=0.7";
+    case VisibilityBin::kMedium:
+      return "0.4-0.7";
+    case VisibilityBin::kLow:
+      return "<0.4";
+  }
+  return "?";
+}
+
+double Summary::Recall(VisibilityBin bin) const {
+  const int i = static_cast<int>(bin);
+  return objects[i] > 0 ? static_cast<double>(found[i]) / objects[i] : kNaN;
+}
+
+double Summary::FalsePositivesPerImage() const {
+  return images > 0 ? static_cast<double>(false_positives) / images : kNaN;
+}
+
+void SummaryBuilder::Add(const ImageEvaluation& evaluation, double time_ms) {
+  ++counts_.images;
+  counts_.false_positives += evaluation.false_positives;
+  time_ms_.push_back(time_ms);
+  for (const ObjectOutcome& o : evaluation.objects) {
+    const int bin = static_cast<int>(BinOf(o.visible_fraction));
+    ++counts_.objects[bin];
+    if (o.detection < 0) continue;
+    ++counts_.found[bin];
+    rotation_deg_.push_back(o.rotation_error_rad * kRadToDeg);
+    across_mm_.push_back(o.position_error.across_m * 1e3);
+    along_mm_.push_back(o.position_error.along_m * 1e3);
+    rms_px_.push_back(o.reprojection_rms_px);
+    if (o.rotation_error_rad <= goals_.rotation_rad && o.position_error.across_m <= goals_.across_m &&
+        o.position_error.along_m <= goals_.along_m) {
+      ++counts_.within_goals;
+    }
+  }
+}
+
+Summary SummaryBuilder::Build() const {
+  Summary s = counts_;
+  s.rotation_deg = Summarize(rotation_deg_);
+  s.across_mm = Summarize(across_mm_);
+  s.along_mm = Summarize(along_mm_);
+  s.reprojection_rms_px = Summarize(rms_px_);
+  s.time_ms = Summarize(time_ms_);
+  return s;
+}
+
+json::Json SummaryToJson(const Summary& s) {
+  json::Json recall = json::Json::object();
+  for (VisibilityBin bin : {VisibilityBin::kHigh, VisibilityBin::kMedium, VisibilityBin::kLow}) {
+    const int i = static_cast<int>(bin);
+    const double r = s.Recall(bin);
+    recall[BinName(bin)] = {{"objects", s.objects[i]},
+                            {"found", s.found[i]},
+                            {"recall", std::isfinite(r) ? json::Json(r) : json::Json(nullptr)}};
+  }
+  const int found = s.found[0] + s.found[1] + s.found[2];
+  return {{"images", s.images},
+          {"recall", recall},
+          {"false_positives", s.false_positives},
+          {"false_positives_per_image", s.images > 0 ? json::Json(s.FalsePositivesPerImage()) : json::Json(nullptr)},
+          {"found_within_goals", s.within_goals},
+          {"found_within_goals_fraction", found > 0 ? json::Json(double(s.within_goals) / found) : json::Json(nullptr)},
+          {"rotation_error_deg", StatsToJson(s.rotation_deg)},
+          {"position_error_across_mm", StatsToJson(s.across_mm)},
+          {"position_error_along_mm", StatsToJson(s.along_mm)},
+          {"reprojection_rms_px", StatsToJson(s.reprojection_rms_px)},
+          {"time_per_image_ms", StatsToJson(s.time_ms)}};
+}
+
+}  // namespace teachsim::vision

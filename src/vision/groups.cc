@@ -1,0 +1,224 @@
+// Item 2 of issue 7 (paper §4.1, §7.1): perceptual groups of connected segments and their index
+// vectors; and the box model's geometry the other stages share.
+#include <algorithm>
+#include <cmath>
+
+#include "teachsim/vision/recognition_stages.h"
+
+namespace teachsim::vision {
+
+Eigen::Vector3d BoxVertex(const Eigen::Vector3d& size_m, int i) {
+  return {(i & 1 ? 0.5 : -0.5) * size_m.x(), (i & 2 ? 0.5 : -0.5) * size_m.y(), (i & 4 ? 0.5 : -0.5) * size_m.z()};
+}
+
+namespace {
+
+// Which faces look at the camera: bit f for face f (-x, +x, -y, +y, -z, +z).
+int FrontFaces(const Eigen::Vector3d& size_m, const Eigen::Vector3d& c) {
+  int mask = 0;
+  for (int axis = 0; axis < 3; ++axis) {
+    if (c[axis] < -0.5 * size_m[axis]) mask |= 1 << (2 * axis);
+    if (c[axis] > 0.5 * size_m[axis]) mask |= 1 << (2 * axis + 1);
+  }
+  return mask;
+}
+
+// The two faces beside edge e.
+std::array<int, 2> EdgeFaces(int e) {
+  const int axis = e / 4;  // the edge runs along this axis
+  const int v = kBoxEdges[e][0];
+  std::array<int, 2> faces{};
+  int n = 0;
+  for (int other = 0; other < 3; ++other) {
+    if (other == axis) continue;
+    faces[n++] = 2 * other + ((v >> other) & 1);
+  }
+  return faces;
+}
+
+double Cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
+
+}  // namespace
+
+uint16_t VisibleBoxEdges(const Eigen::Vector3d& size_m, const Eigen::Vector3d& camera_in_object) {
+  const int front = FrontFaces(size_m, camera_in_object);
+  uint16_t mask = 0;
+  for (int e = 0; e < 12; ++e) {
+    const auto f = EdgeFaces(e);
+    if ((front >> f[0] & 1) || (front >> f[1] & 1)) mask |= static_cast<uint16_t>(1 << e);
+  }
+  return mask;
+}
+
+uint16_t OutlineBoxEdges(const Eigen::Vector3d& size_m, const Eigen::Vector3d& camera_in_object) {
+  const int front = FrontFaces(size_m, camera_in_object);
+  uint16_t mask = 0;
+  for (int e = 0; e < 12; ++e) {
+    const auto f = EdgeFaces(e);
+    if ((front >> f[0] & 1) != (front >> f[1] & 1)) mask |= static_cast<uint16_t>(1 << e);
+  }
+  return mask;
+}
+
+int GroupSegments(GroupKind kind) { return kind == GroupKind::kChain4 ? 4 : 3; }
+int GroupDimension(GroupKind kind) { return kind == GroupKind::kChain4 ? 6 : 4; }
+
+// Length ratios are less reliable than angles (occlusion and junction placement shorten
+// segments), so they count half.
+constexpr double kRatioWeight = 0.5;
+
+std::vector<float> IndexVector(const Group& group) {
+  std::vector<float> v;
+  if (group.kind == GroupKind::kFork3) {
+    Eigen::Vector2d u[3];
+    for (int k = 0; k < 3; ++k) u[k] = group.points[k + 1] - group.points[0];
+    for (int k = 0; k < 2; ++k) {
+      double a = std::atan2(Cross2(u[k], u[k + 1]), u[k].dot(u[k + 1]));
+      if (a < 0) a += 2 * M_PI;
+      v.push_back(static_cast<float>(a));
+    }
+    for (int k = 1; k < 3; ++k) {
+      v.push_back(static_cast<float>(kRatioWeight * std::log(u[k].norm() / std::max(u[0].norm(), 1e-9))));
+    }
+    return v;
+  }
+  const int n = GroupSegments(group.kind);
+  Eigen::Vector2d d[4];
+  for (int k = 0; k < n; ++k) d[k] = group.points[k + 1] - group.points[k];
+  for (int k = 1; k < n; ++k) v.push_back(static_cast<float>(std::atan2(Cross2(d[k - 1], d[k]), d[k - 1].dot(d[k]))));
+  for (int k = 1; k < n; ++k) {
+    v.push_back(static_cast<float>(kRatioWeight * std::log(std::max(d[k].norm(), 1e-9) / std::max(d[k - 1].norm(), 1e-9))));
+  }
+  return v;
+}
+
+namespace {
+
+struct Junction {
+  int segment = 0, end = 0;  // the other segment and which of its ends (0: a, 1: b)
+  Eigen::Vector2d point;     // where the two lines meet, px
+};
+
+Eigen::Vector2d End(const ImageLine& l, int end) { return end == 0 ? l.a : l.b; }
+
+}  // namespace
+
+std::vector<Group> FindGroups(const std::vector<ImageLine>& lines, const RecognizerOptions& options,
+                              int max_groups_per_kind) {
+  const int n = static_cast<int>(lines.size());
+  const double min_sin = std::sin(15.0 * M_PI / 180);
+  // junctions[2 * i + end]: the segment ends meeting segment i's end.
+  std::vector<std::vector<Junction>> junctions(static_cast<size_t>(2 * n));
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector2d di = (lines[i].b - lines[i].a).normalized();
+    for (int j = i + 1; j < n; ++j) {
+      const Eigen::Vector2d dj = (lines[j].b - lines[j].a).normalized();
+      const double s = Cross2(di, dj);
+      if (std::abs(s) < min_sin) continue;
+      const double gap = std::max(options.junction_gap_px,
+                                  0.25 * std::min(lines[i].Length(), lines[j].Length()));
+      for (int ei = 0; ei < 2; ++ei) {
+        const Eigen::Vector2d p = End(lines[i], ei);
+        for (int ej = 0; ej < 2; ++ej) {
+          const Eigen::Vector2d q = End(lines[j], ej);
+          if ((p - q).squaredNorm() > 4 * gap * gap) continue;
+          // Intersection of the two lines: p + t di = q + u dj.
+          const double t = Cross2(q - p, dj) / s;
+          const Eigen::Vector2d x = p + t * di;
+          if ((x - p).norm() > gap || (x - q).norm() > gap) continue;
+          junctions[static_cast<size_t>(2 * i + ei)].push_back({j, ej, x});
+          junctions[static_cast<size_t>(2 * j + ej)].push_back({i, ei, x});
+        }
+      }
+    }
+  }
+
+  std::vector<Group> groups;
+  int counts[kGroupKinds] = {0, 0, 0};
+  // Chains: depth-first from each segment in each direction.
+  struct Step {
+    int segment, entry_end;
+    Eigen::Vector2d entry_point;
+  };
+  std::vector<Step> path;
+  auto emit = [&](GroupKind kind) {
+    int& count = counts[static_cast<int>(kind)];
+    if (count >= max_groups_per_kind) return;
+    const int m = static_cast<int>(path.size());
+    if (path.front().segment > path.back().segment) return;  // the reversed chain is the same group
+    Group g;
+    g.kind = kind;
+    for (int k = 0; k < m; ++k) {
+      g.segments[static_cast<size_t>(k)] = path[static_cast<size_t>(k)].segment;
+      g.points[static_cast<size_t>(k)] = path[static_cast<size_t>(k)].entry_point;
+    }
+    const Step& last = path.back();
+    g.points[static_cast<size_t>(m)] = End(lines[static_cast<size_t>(last.segment)], 1 - last.entry_end);
+    groups.push_back(g);
+    ++count;
+  };
+  auto extend = [&](auto&& self) -> void {
+    const size_t m = path.size();
+    if (m == 3) emit(GroupKind::kChain3);
+    if (m == 4) {
+      emit(GroupKind::kChain4);
+      return;
+    }
+    const Step& s = path.back();
+    for (const Junction& j : junctions[static_cast<size_t>(2 * s.segment + (1 - s.entry_end))]) {
+      bool used = false;
+      for (const Step& p : path) used = used || p.segment == j.segment;
+      if (used) continue;
+      path.push_back({j.segment, j.end, j.point});
+      self(self);
+      path.pop_back();
+    }
+  };
+  for (int i = 0; i < n; ++i) {
+    for (int e = 0; e < 2; ++e) {
+      path.clear();
+      path.push_back({i, e, End(lines[static_cast<size_t>(i)], e)});
+      extend(extend);
+    }
+  }
+  // Forks (Y and arrow junctions): three segment ends meeting pairwise.
+  for (int i = 0; i < n; ++i) {
+    for (int ei = 0; ei < 2; ++ei) {
+      const auto& ji = junctions[static_cast<size_t>(2 * i + ei)];
+      for (size_t a = 0; a < ji.size(); ++a) {
+        for (size_t b = a + 1; b < ji.size(); ++b) {
+          const Junction &x = ji[a], &y = ji[b];
+          if (x.segment < i || y.segment < i || x.segment == y.segment) continue;
+          const auto& jx = junctions[static_cast<size_t>(2 * x.segment + x.end)];
+          const auto it = std::find_if(jx.begin(), jx.end(),
+                                       [&](const Junction& z) { return z.segment == y.segment && z.end == y.end; });
+          if (it == jx.end()) continue;
+          if (counts[static_cast<int>(GroupKind::kFork3)] >= max_groups_per_kind) continue;
+          Group g;
+          g.kind = GroupKind::kFork3;
+          g.points[0] = (x.point + y.point + it->point) / 3.0;
+          std::array<std::pair<double, int>, 3> arms;
+          const int segs[3] = {i, x.segment, y.segment};
+          const int ends[3] = {ei, x.end, y.end};
+          Eigen::Vector2d far[3];
+          for (int k = 0; k < 3; ++k) {
+            far[k] = End(lines[static_cast<size_t>(segs[k])], 1 - ends[k]);
+            const Eigen::Vector2d u = far[k] - g.points[0];
+            arms[static_cast<size_t>(k)] = {std::atan2(u.y(), u.x()), k};
+          }
+          std::sort(arms.begin(), arms.end());
+          for (int k = 0; k < 3; ++k) {
+            const int src = arms[static_cast<size_t>(k)].second;
+            g.segments[static_cast<size_t>(k)] = segs[src];
+            g.points[static_cast<size_t>(k + 1)] = far[src];
+          }
+          groups.push_back(g);
+          ++counts[static_cast<int>(GroupKind::kFork3)];
+        }
+      }
+    }
+  }
+  return groups;
+}
+
+}  // namespace teachsim::vision

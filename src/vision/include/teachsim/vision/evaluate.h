@@ -1,0 +1,180 @@
+// Scoring recognitions against truth (issue 7, "Show"): which recognition is which block, how far
+// off its pose is, and the figures the recognition benchmark reports — recall per visible-fraction
+// bin, false positives per image, position error across the view and along the line of sight,
+// symmetry-aware rotation error, and their median / p90 / max. Also the loader of the dev set's
+// truth file (../shared/data/vision-dev/truth.json; docs/bench_recognize.md).
+//
+// Blocks are boxes: a box is equal to itself under the proper rotations that permute its sides of
+// equal length (4 for distinct sides, 8 with two equal sides, 24 for a cube), so rotation errors
+// are the smallest over that group.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <limits>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "teachsim/base/json.h"
+#include "teachsim/base/status.h"
+#include "teachsim/geometry/pose.h"
+#include "teachsim/scene/scene.h"
+
+namespace teachsim::vision {
+
+// The proper rotations (object frame) that map a centred box of full side lengths `size_m` onto
+// itself: signed permutations with determinant +1 that only exchange sides equal within
+// `tolerance_m`. The identity comes first.
+std::vector<Eigen::Quaterniond> BoxSymmetries(const Eigen::Vector3d& size_m, double tolerance_m = 1e-6);
+
+// The angle (rad, [0, pi]) of the smallest rotation taking `estimate` to any pose equal to `truth`
+// under the symmetry group: min over S of angle(estimate^-1 * truth * S).
+double SymmetricRotationError(const Eigen::Quaterniond& world_R_truth, const Eigen::Quaterniond& world_R_estimate,
+                              const std::vector<Eigen::Quaterniond>& symmetries);
+
+// A position error split by the camera's line of sight to the true position: `along_m` is the
+// (unsigned) component along that line, the monocular camera's weak direction; `across_m` the rest.
+struct PositionError {
+  double across_m = 0, along_m = 0;
+};
+PositionError SplitPositionError(const Eigen::Vector3d& truth_in_world, const Eigen::Vector3d& estimate_in_world,
+                                 const Eigen::Vector3d& camera_centre_in_world);
+
+// --- Truth ---------------------------------------------------------------------------------------
+
+struct TruthObject {
+  std::string name, model;
+  geometry::Pose3 world_T_object;  // box centre, box axes
+  double visible_fraction = 1;     // visible share of the object's silhouette in the image
+  int visible_pixels = 0;
+};
+
+// A rectangular frame lying on the table: walls of `wall_m` around an inner opening of
+// `inner_m`, `height_m` tall; world_T_frame at the centre of the opening on the table (z = 0).
+struct FrameTruth {
+  geometry::Pose3 world_T_frame;
+  Eigen::Vector2d inner_m = Eigen::Vector2d::Zero();
+  double wall_m = 0, height_m = 0;
+};
+
+struct TruthCase {
+  std::string image;  // path: absolute, or relative to the truth file's folder as loaded
+  scene::CameraSpec camera;
+  std::optional<FrameTruth> frame;
+  std::vector<TruthObject> objects;
+};
+
+struct TruthSet {
+  std::map<std::string, Eigen::Vector3d> model_sizes_m;  // full box side lengths per model name
+  std::vector<TruthCase> cases;
+};
+
+// Loads a truth file of the dev-set format: {"models": {name: [x, y, z]}, "cases": [{"image",
+// "camera": camera entry + "convention", "frame": pose + inner/wall/height, "objects": [{"name",
+// "model", "position", "quaternion_wxyz", "visible_fraction", "visible_pixels", "dims"?}]}]}.
+// Image paths are made absolute against the file's folder. Every object's model must be in
+// "models" (and its "dims", when given, must equal the model's sizes).
+[[nodiscard]] Result<TruthSet> LoadTruthSet(const std::string& path);
+
+// The fixed world a recognizer may be told about: a table (top at z = 0) and the frame, if any.
+scene::Scene FixedWorldScene(const std::optional<FrameTruth>& frame);
+
+// --- Matching --------------------------------------------------------------------------------------
+
+struct Detection {
+  std::string model;
+  geometry::Pose3 world_T_object;
+  double score = 0;  // higher is more confident; matching takes detections in this order
+  double reprojection_rms_px = std::numeric_limits<double>::quiet_NaN();  // NaN: not reported
+};
+
+// When a detection counts as finding a truth object. The thresholds decide "found" (recall); the
+// errors of found objects are then reported separately against the goals.
+struct MatchOptions {
+  double max_across_m = 0.015;                    // a third of a 45 mm block
+  double max_along_m = 0.05;                      // depth is the monocular camera's weak direction
+  double max_rotation_rad = 20.0 * 3.14159265358979 / 180.0;
+  // Objects less visible than this (or entirely outside the image) are not scored: missing them
+  // is no miss and finding them no false positive.
+  double min_visible_fraction = 0.05;
+  [[nodiscard]] Status Validate() const;
+};
+
+struct ObjectOutcome {
+  int truth = -1;      // index into the truth objects
+  int detection = -1;  // the matched detection, or -1 when missed
+  double visible_fraction = 0;
+  double rotation_error_rad = 0;  // of the match
+  PositionError position_error;   // of the match
+  double reprojection_rms_px = std::numeric_limits<double>::quiet_NaN();  // the match's own figure
+};
+
+struct ImageEvaluation {
+  std::vector<ObjectOutcome> objects;  // every scored truth object, in truth order
+  std::vector<int> detection_truth;    // per detection: matched truth index, -1 false, -2 matched an unscored object
+  int false_positives = 0;
+};
+
+// Greedy matching in order of falling detection score: each detection takes the unmatched truth
+// object of its model within the thresholds with the smallest normalised error (the sum of each
+// error over its threshold); detections left over, duplicates included, are false positives.
+// Fails when a truth object's model has no size in `model_sizes_m` (its symmetries are unknown).
+[[nodiscard]] Result<ImageEvaluation> EvaluateImage(const std::vector<TruthObject>& truth,
+                                                    const std::vector<Detection>& detections,
+                                                    const std::map<std::string, Eigen::Vector3d>& model_sizes_m,
+                                                    const Eigen::Vector3d& camera_centre_in_world,
+                                                    const MatchOptions& options);
+
+// --- Summary ---------------------------------------------------------------------------------------
+
+struct Stats {
+  int count = 0;
+  double median = std::numeric_limits<double>::quiet_NaN();
+  double p90 = std::numeric_limits<double>::quiet_NaN();
+  double max = std::numeric_limits<double>::quiet_NaN();
+};
+// Order statistics of the finite values (nearest rank: p90 is the smallest value with at least 90 %
+// of the values at or below it).
+Stats Summarize(std::vector<double> values);
+
+// The visible-fraction bins of issue 7: [0.7, 1], [0.4, 0.7), [min_visible_fraction, 0.4).
+enum class VisibilityBin { kHigh = 0, kMedium = 1, kLow = 2 };
+VisibilityBin BinOf(double visible_fraction);
+const char* BinName(VisibilityBin bin);  // ">=0.7", "0.4-0.7", "<0.4"
+
+// The issue's goals for a found object's pose.
+struct PoseGoals {
+  double rotation_rad = 0.5 * 3.14159265358979 / 180.0;
+  double across_m = 0.001, along_m = 0.002;
+};
+
+struct Summary {
+  int images = 0;
+  int objects[3] = {0, 0, 0};  // per VisibilityBin
+  int found[3] = {0, 0, 0};
+  int false_positives = 0;
+  int within_goals = 0;  // found objects whose pose meets every PoseGoals figure
+  Stats rotation_deg, across_mm, along_mm, reprojection_rms_px, time_ms;
+
+  double Recall(VisibilityBin bin) const;  // NaN when the bin is empty
+  double FalsePositivesPerImage() const;
+};
+
+// Collects the figures over images; add each image's evaluation and its recognition time.
+class SummaryBuilder {
+ public:
+  explicit SummaryBuilder(PoseGoals goals = {}) : goals_(goals) {}
+  void Add(const ImageEvaluation& evaluation, double time_ms);
+  Summary Build() const;
+
+ private:
+  PoseGoals goals_;
+  Summary counts_;
+  std::vector<double> rotation_deg_, across_mm_, along_mm_, rms_px_, time_ms_;
+};
+
+json::Json SummaryToJson(const Summary& summary);
+
+}  // namespace teachsim::vision

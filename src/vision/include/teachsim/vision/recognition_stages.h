@@ -1,0 +1,113 @@
+// The recognizer's stages, one function each, for tests and for the benchmark (recognizer.h is the
+// API; this is how it works inside). Coordinates: "px" below means undistorted pixels (an ideal
+// camera with the real intrinsics), unless a name says `distorted`.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "teachsim/geometry/pose.h"
+#include "teachsim/vision/camera.h"
+#include "teachsim/vision/recognizer.h"
+
+namespace teachsim::vision {
+
+// ---- the box model: vertex i has coordinates (+-sx/2, +-sy/2, +-sz/2) with bit 0 -> x, 1 -> y, 2 -> z
+// set meaning +; edge e joins vertices kBoxEdges[e]; face f is -x, +x, -y, +y, -z, +z.
+inline constexpr std::array<std::array<int, 2>, 12> kBoxEdges = {{{0, 1}, {2, 3}, {4, 5}, {6, 7},  // along x
+                                                                 {0, 2}, {1, 3}, {4, 6}, {5, 7},  // along y
+                                                                 {0, 4}, {1, 5}, {2, 6}, {3, 7}}};  // along z
+Eigen::Vector3d BoxVertex(const Eigen::Vector3d& size_m, int i);  // in the object frame, m
+// The edges of the box not hidden by the box itself when seen from a camera centre given in the
+// object frame (hidden-line removal for a convex body: an edge shows when a face beside it faces
+// the camera). Bit e of the result is edge e.
+uint16_t VisibleBoxEdges(const Eigen::Vector3d& size_m, const Eigen::Vector3d& camera_in_object);
+// The ones among them on the outline (one adjacent face towards the camera, the other away).
+uint16_t OutlineBoxEdges(const Eigen::Vector3d& size_m, const Eigen::Vector3d& camera_in_object);
+
+// ---- item 1: the image's edges (kept for verification) and lines.
+struct EdgeMap {
+  cv::Mat edges;      // CV_8U, 255 on Canny edge pixels (distorted image)
+  cv::Mat direction;  // CV_32F, gradient direction at edge pixels, rad in (-pi, pi]
+  cv::Mat smoothed;   // CV_8U, the image after the Gaussian (contrast across predicted edges)
+};
+struct LineDetection {
+  EdgeMap edge_map;
+  std::vector<ImageLine> lines;  // undistorted px
+  int edge_points = 0;
+};
+LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& camera,
+                                  const RecognizerOptions& options);
+
+// ---- item 2: perceptual groups.
+enum class GroupKind : uint8_t { kChain3 = 0, kChain4 = 1, kFork3 = 2 };
+inline constexpr int kGroupKinds = 3;
+int GroupSegments(GroupKind kind);   // 3, 4, 3
+int GroupDimension(GroupKind kind);  // length of the index vector: 4, 6, 4
+// A group's geometry. Chains: points[0..n] along the chain (points[0] and points[n] are the free
+// ends, the others junctions, segment i joins points[i] and points[i+1]). Forks: points[0] is the
+// junction and points[1..3] the arms' far ends, counter-clockwise in the image (y down).
+struct Group {
+  GroupKind kind = GroupKind::kChain3;
+  std::array<int, 4> segments{-1, -1, -1, -1};  // indices into the image lines (image groups)
+  std::array<Eigen::Vector2d, 5> points{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero(),
+                                        Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};  // px
+};
+// The index vector: turn angles (rad) and logarithms of length ratios (weighted); invariant to 2D
+// translation, rotation and scale, not to reflection.
+std::vector<float> IndexVector(const Group& group);
+// Connected groups in the image: segments whose ends meet at a junction (line intersection within
+// options.junction_gap_px of both ends, at an angle > 15 deg). At most max_groups per kind.
+std::vector<Group> FindGroups(const std::vector<ImageLine>& lines, const RecognizerOptions& options,
+                              int max_groups_per_kind = 4000);
+
+// ---- item 4: Lowe's least-squares fit of model edges to image lines.
+struct LineMatch {
+  int edge = 0;                    // box edge index
+  Eigen::Vector2d a, b;            // the image segment's endpoints, undistorted px
+};
+struct FitResult {
+  geometry::Pose3 camera_T_object;
+  double rms_px = 0;                               // of the endpoint-to-line residuals
+  Eigen::Matrix<double, 6, 6> covariance_camera;   // translation m, rotation rad, camera axes
+  int iterations = 0;
+  bool converged = false;
+};
+// Gauss-Newton (with Huber weights when huber_px > 0) on the perpendicular distances of the image
+// segments' endpoints to the projected model edges.
+FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
+                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
+                         int max_iterations, double huber_px);
+
+// ---- item 5: the evidence for a pose (what verification decides on).
+struct PoseEvidence {
+  double matched_fraction = 0;  // of the visible predicted edge length covered by matched lines
+  double support_fraction = 0;  // of the informative sample points along the visible edges (an edge pixel
+                                // across, or contrast across the edge) those with an edge pixel across
+  double coverage = 0;          // supported sample points of all sample points along the visible edges
+  double supported_px = 0;      // supported length, px
+  double rms_px = 0;            // of the matched lines' endpoints to their predicted edges
+  int matches = 0;
+};
+PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                          const LineDetection& detection, const RecognizerOptions& options);
+
+// ---- item 5/6 helpers: the smallest translation separating two convex sets of vertices with the
+// given candidate axes (separating-axis test). depth <= 0 means they do not overlap.
+struct Penetration {
+  double depth_m = 0;
+  Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();  // move the first set this way by depth_m
+};
+// General form: vertex sets in one frame and the candidate axes (unit; face normals and edge
+// cross products of both sets for convex polyhedra).
+Penetration VertexSetPenetration(const std::vector<Eigen::Vector3d>& a, const std::vector<Eigen::Vector3d>& b,
+                                 const std::vector<Eigen::Vector3d>& axes);
+Penetration BoxBoxPenetration(const Eigen::Vector3d& size_a, const geometry::Pose3& world_T_a,
+                              const Eigen::Vector3d& size_b, const geometry::Pose3& world_T_b,
+                              bool horizontal_only);
+
+}  // namespace teachsim::vision

@@ -1,0 +1,137 @@
+// Model-based recognition of blocks in one camera image (paper §4, §4.1-4.3, §7.1): sub-pixel
+// edges and straight segments, perceptual groups, an index over model views with approximate
+// nearest-neighbour search (Beis & Lowe), pose by Lowe's iterative least squares on line-to-line
+// residuals, verification, and the model editor's rules (rest on the table, no interpenetration).
+//
+// Frames: world (z up, table top z = 0 when a fixed world is given), camera (OpenCV axes, from
+// Camera::world_T_camera), object (the box's centre, axes along its sides).
+#pragma once
+
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "teachsim/base/status.h"
+#include "teachsim/geometry/pose.h"
+#include "teachsim/scene/scene.h"
+#include "teachsim/vision/camera.h"
+
+namespace teachsim::vision {
+
+// A model of the library: blocks are boxes, centred on their object frame.
+struct Model {
+  std::string name;
+  Eigen::Vector3d box_size_m = Eigen::Vector3d::Zero();  // full side lengths along object x, y, z, m
+};
+
+struct ModelLibrary {
+  std::vector<Model> models;
+};
+
+// MODELS.json is either a scene file (each movable box-shaped object becomes a model, named by its
+// `model` field when it has one, else by its name; equal names must have equal sizes) or
+// {"models": [{"name": ..., "shape": shape}]} with shapes as in the scene format (boxes only).
+// Errors name the file and the JSON path.
+[[nodiscard]] Result<ModelLibrary> LoadModels(const std::string& path);
+// A stable hash of the models' names and sizes (the index cache key, with the options).
+uint64_t HashModelLibrary(const ModelLibrary& models);
+
+struct RecognizerOptions {
+  // --- lines (item 1)
+  double canny_low = 40, canny_high = 100;   // Canny thresholds on the L2 magnitude of 3x3 Sobel derivatives (8x grey levels/px)
+  double min_segment_length_px = 12;         // shorter segments are dropped, px
+  double split_tolerance_px = 0.8;           // Ramer split: largest point-to-chord distance, px
+  // --- grouping (item 2)
+  double junction_gap_px = 8;                // endpoints closer than this (relative 0.25 of the shorter segment, whichever larger) are connected, px
+  // --- index (item 3)
+  int view_sphere_samples = 600;             // viewing directions per model over the upper hemisphere(s)
+  std::vector<double> view_distances_m = {0.45, 0.7};  // camera distances used for the model views, m
+  int neighbours = 6;                        // k of the approximate k-nearest-neighbour search
+  int max_checks = 64;                       // leaves visited by the priority (best-bin-first) search
+  int max_hypotheses = 120;                  // hypotheses tried per image, most probable first
+  // --- pose (item 4)
+  int max_iterations = 20;                   // Gauss-Newton iterations of Lowe's fit
+  double huber_px = 1.5;                     // Huber threshold on line residuals, px
+  double match_distance_px = 6;              // a predicted edge matches a segment this close, px
+  double match_angle_deg = 8;                // ... and this parallel, deg
+  // --- verification (item 5)
+  double min_matched_edge_fraction = 0.35;   // of the visible predicted edge length matched by image lines, 0..1
+  double min_score = 0.7;                    // edge support where the image shows contrast across the predicted edge, 0..1
+  double min_coverage = 0.35;                // edge support along all visible predicted edges, 0..1
+  double min_edge_contrast = 10;             // grey levels across a predicted edge (5 px apart) for it to count as informative
+  double max_reprojection_rms_px = 2.0;      // matched segments' RMS distance to predicted edges, px
+  double work_area_radius_m = 0.6;           // poses farther than this from the world origin (in x, y) are culled, m
+  double below_table_tolerance_m = 0.005;    // poses whose box reaches deeper under z = 0 are culled, m
+  double support_tolerance_m = 0.012;        // a recognition must rest on something: its lowest point this close to
+                                             // the table top, a fixed object's top or another recognition's top, m
+  // --- model editor (item 6, §4.3)
+  double table_snap_distance_m = 0.01;       // an object whose lowest point is this close to a support rests on it, m
+  double table_snap_max_tilt_deg = 6;        // ... when one of its faces is this close to horizontal, deg
+  [[nodiscard]] Status Validate() const;
+};
+
+struct Recognition {
+  std::string model;                 // Model::name
+  geometry::Pose3 world_T_object;    // after the model editor's rules
+  geometry::Pose3 raw_world_T_object;  // as fitted
+  double score = 0;                  // 0..1, edge support along the visible predicted edges where the image has contrast
+  double matched_edge_fraction = 0;  // share of the visible predicted edge length matched by segments, 0..1
+  double reprojection_rms_px = 0;    // RMS distance of matched segment points to their predicted edges, px
+  // Of the raw pose, in the object frame's perturbation (translation m in world axes, rotation rad
+  // as a world-frame rotation vector): order tx ty tz rx ry rz. From the fit's Gauss-Newton
+  // normal matrix scaled by the residual variance.
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
+  std::vector<std::string> adjustments;  // what the model editor did, for people
+};
+
+struct RecognitionResult {
+  std::vector<Recognition> objects;
+  std::vector<std::pair<std::string, double>> timing_ms;  // per stage, in order, ms
+};
+
+// A line segment found in the image, in undistorted pixel coordinates (an ideal camera with the
+// same intrinsics: straight world edges are straight here).
+struct ImageLine {
+  Eigen::Vector2d a, b;  // px
+  double Length() const { return (b - a).norm(); }
+};
+
+// Item 1: sub-pixel Canny edges, chains, Ramer splitting, least-squares fits; undistorted pixels.
+std::vector<ImageLine> DetectLines(const cv::Mat& image_gray8, const Camera& camera,
+                                   const RecognizerOptions& options);
+
+struct RecognizerIndex;  // the model-view index (internal)
+
+class Recognizer {
+ public:
+  // Builds the model-view index, or loads it from cache_dir when the library and the index options
+  // have not changed (cache_dir empty: no cache). The recognizer is const after this.
+  [[nodiscard]] static Result<Recognizer> Create(const ModelLibrary& models, const RecognizerOptions& options,
+                                                 const std::string& cache_dir);
+  // image: 8-bit monochrome as the camera saw it (distorted). fixed_world: the table/frame the
+  // model editor's rules use (objects near z = 0 or a fixed object's top rest on it; recognitions
+  // inside fixed objects are culled); may be null (then z = 0 is the table).
+  [[nodiscard]] Result<RecognitionResult> Recognize(const cv::Mat& image_gray8, const Camera& camera,
+                                                    const scene::Scene* fixed_world) const;
+
+  const ModelLibrary& models() const { return models_; }
+  const RecognizerOptions& options() const { return options_; }
+  bool loaded_from_cache() const { return loaded_from_cache_; }
+  size_t index_size() const;  // index vectors over all models and group kinds
+
+ private:
+  ModelLibrary models_;
+  RecognizerOptions options_;
+  std::shared_ptr<const RecognizerIndex> index_;
+  bool loaded_from_cache_ = false;
+};
+
+// Poses equal up to the box's symmetry group (rotations by pi about its axes, and pi/2 about an
+// axis whose two other sides are equal): the smallest rotation angle between a and b over it, rad.
+double SymmetricRotationAngle(const Model& model, const geometry::Pose3& a, const geometry::Pose3& b);
+
+}  // namespace teachsim::vision

@@ -1,0 +1,231 @@
+// Item 1 of issue 7 (paper §4.2: "image lines are determined through a least-squares fit to each
+// pixel along an edge"): Canny edges, located to sub-pixel precision along the gradient, linked into
+// chains, undistorted, split Ramer-style and fitted by least squares.
+#include <algorithm>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+#include "teachsim/vision/recognition_stages.h"
+
+namespace teachsim::vision {
+
+namespace {
+
+// Bilinear sample of a CV_32F image (clamped).
+float Sample(const cv::Mat& m, double x, double y) {
+  x = std::clamp(x, 0.0, m.cols - 1.001);
+  y = std::clamp(y, 0.0, m.rows - 1.001);
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const double fx = x - x0, fy = y - y0;
+  const float* r0 = m.ptr<float>(y0);
+  const float* r1 = m.ptr<float>(y0 + 1);
+  return static_cast<float>((1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
+                            fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]));
+}
+
+// 8-connected chains of edge pixels; each pixel belongs to one chain.
+std::vector<std::vector<cv::Point>> TraceChains(const cv::Mat& edges) {
+  static constexpr int kDx[8] = {1, 0, -1, 0, 1, -1, -1, 1};
+  static constexpr int kDy[8] = {0, 1, 0, -1, 1, 1, -1, -1};
+  cv::Mat visited = cv::Mat::zeros(edges.size(), CV_8U);
+  const int w = edges.cols, h = edges.rows;
+  auto is_edge = [&](int x, int y) {
+    return x >= 0 && y >= 0 && x < w && y < h && edges.at<uint8_t>(y, x) && !visited.at<uint8_t>(y, x);
+  };
+  auto neighbours = [&](int x, int y) {
+    int n = 0;
+    for (int k = 0; k < 8; ++k) n += is_edge(x + kDx[k], y + kDy[k]) ? 1 : 0;
+    return n;
+  };
+  std::vector<std::vector<cv::Point>> chains;
+  auto walk = [&](int x, int y) {
+    std::vector<cv::Point> chain;
+    visited.at<uint8_t>(y, x) = 1;
+    chain.push_back({x, y});
+    // Extend in both directions from the seed.
+    for (int pass = 0; pass < 2; ++pass) {
+      int cx = x, cy = y;
+      for (;;) {
+        int next = -1;
+        for (int k = 0; k < 8; ++k) {  // 4-neighbours first (k < 4)
+          if (is_edge(cx + kDx[k], cy + kDy[k])) {
+            next = k;
+            break;
+          }
+        }
+        if (next < 0) break;
+        cx += kDx[next];
+        cy += kDy[next];
+        visited.at<uint8_t>(cy, cx) = 1;
+        chain.push_back({cx, cy});
+      }
+      if (pass == 0) std::reverse(chain.begin(), chain.end());
+    }
+    if (chain.size() >= 5) chains.push_back(std::move(chain));
+  };
+  // Chain ends first, so open chains are traced from one end; then what is left (closed loops).
+  for (int y = 0; y < h; ++y) {
+    const uint8_t* row = edges.ptr<uint8_t>(y);
+    for (int x = 0; x < w; ++x) {
+      if (row[x] && !visited.at<uint8_t>(y, x) && neighbours(x, y) <= 1) walk(x, y);
+    }
+  }
+  for (int y = 0; y < h; ++y) {
+    const uint8_t* row = edges.ptr<uint8_t>(y);
+    for (int x = 0; x < w; ++x) {
+      if (row[x] && !visited.at<uint8_t>(y, x)) walk(x, y);
+    }
+  }
+  return chains;
+}
+
+// Least-squares line through points[i..j] (inclusive); endpoints are the projections of the first
+// and last points. Returns the RMS distance.
+double FitLine(const std::vector<Eigen::Vector2d>& points, int i, int j, ImageLine* line) {
+  const int n = j - i + 1;
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (int k = i; k <= j; ++k) mean += points[k];
+  mean /= n;
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+  for (int k = i; k <= j; ++k) {
+    const Eigen::Vector2d d = points[k] - mean;
+    cov += d * d.transpose();
+  }
+  // Direction: the principal eigenvector of the 2x2 scatter (closed form).
+  const double a = cov(0, 0), b = cov(0, 1), c = cov(1, 1);
+  const double angle = 0.5 * std::atan2(2 * b, a - c);
+  const Eigen::Vector2d dir(std::cos(angle), std::sin(angle));
+  const Eigen::Vector2d normal(-dir.y(), dir.x());
+  double ss = 0;
+  for (int k = i; k <= j; ++k) ss += std::pow(normal.dot(points[k] - mean), 2);
+  line->a = mean + dir * dir.dot(points[i] - mean);
+  line->b = mean + dir * dir.dot(points[j] - mean);
+  return std::sqrt(ss / n);
+}
+
+void SplitAndFit(const std::vector<Eigen::Vector2d>& points, int i, int j, const RecognizerOptions& options,
+                 std::vector<ImageLine>* out, int depth = 0) {
+  if (j - i + 1 < 4) return;
+  const Eigen::Vector2d p = points[i], q = points[j];
+  const double len = (q - p).norm();
+  if (len < options.min_segment_length_px && depth > 0) return;
+  int worst = -1;
+  double worst_d = 0;
+  if (len > 1e-9) {
+    const Eigen::Vector2d n = Eigen::Vector2d(-(q - p).y(), (q - p).x()) / len;
+    for (int k = i + 1; k < j; ++k) {
+      const double d = std::abs(n.dot(points[k] - p));
+      if (d > worst_d) worst_d = d, worst = k;
+    }
+  } else {
+    worst = (i + j) / 2;
+    worst_d = 1e9;
+  }
+  if (worst_d > options.split_tolerance_px && worst > i && worst < j && depth < 64) {
+    SplitAndFit(points, i, worst, options, out, depth + 1);
+    SplitAndFit(points, worst, j, options, out, depth + 1);
+    return;
+  }
+  ImageLine line;
+  FitLine(points, i, j, &line);
+  if (line.Length() >= options.min_segment_length_px) out->push_back(line);
+}
+
+// Joins nearly collinear pieces of one edge broken by texture or noise (small gaps).
+std::vector<ImageLine> MergeCollinear(std::vector<ImageLine> lines) {
+  constexpr double kMaxAngle = 2.0 * M_PI / 180, kMaxOffsetPx = 1.2, kMaxGapPx = 6.0;
+  std::sort(lines.begin(), lines.end(), [](const ImageLine& x, const ImageLine& y) { return x.Length() > y.Length(); });
+  std::vector<bool> gone(lines.size(), false);
+  for (size_t i = 0; i < lines.size(); ++i) {
+    if (gone[i]) continue;
+    bool merged = true;
+    while (merged) {
+      merged = false;
+      ImageLine& l = lines[i];
+      const Eigen::Vector2d dir = (l.b - l.a).normalized();
+      const Eigen::Vector2d n(-dir.y(), dir.x());
+      for (size_t j = i + 1; j < lines.size(); ++j) {
+        if (gone[j]) continue;
+        const ImageLine& m = lines[j];
+        const Eigen::Vector2d mdir = (m.b - m.a).normalized();
+        if (std::abs(dir.x() * mdir.y() - dir.y() * mdir.x()) > std::sin(kMaxAngle)) continue;
+        if (std::abs(n.dot(m.a - l.a)) > kMaxOffsetPx || std::abs(n.dot(m.b - l.a)) > kMaxOffsetPx) continue;
+        const double ta = dir.dot(m.a - l.a), tb = dir.dot(m.b - l.a), len = l.Length();
+        const double lo = std::min(ta, tb), hi = std::max(ta, tb);
+        if (lo > len + kMaxGapPx || hi < -kMaxGapPx) continue;  // too far apart along the line
+        // The longer piece carries the line; extend it to cover both.
+        const double new_lo = std::min(0.0, lo), new_hi = std::max(len, hi);
+        const Eigen::Vector2d a = l.a;
+        l.a = a + dir * new_lo;
+        l.b = a + dir * new_hi;
+        gone[j] = true;
+        merged = true;
+      }
+    }
+  }
+  std::vector<ImageLine> out;
+  for (size_t i = 0; i < lines.size(); ++i) {
+    if (!gone[i]) out.push_back(lines[i]);
+  }
+  return out;
+}
+
+}  // namespace
+
+LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& camera,
+                                  const RecognizerOptions& options) {
+  TEACHSIM_CHECK(image_gray8.type() == CV_8UC1);
+  LineDetection out;
+  cv::Mat blurred, dx, dy;
+  cv::GaussianBlur(image_gray8, blurred, cv::Size(5, 5), 1.0);
+  cv::Sobel(blurred, dx, CV_16S, 1, 0, 3);
+  cv::Sobel(blurred, dy, CV_16S, 0, 1, 3);
+  cv::Canny(dx, dy, out.edge_map.edges, options.canny_low, options.canny_high, true);
+  out.edge_map.smoothed = blurred;
+
+  cv::Mat fdx, fdy, magnitude;
+  dx.convertTo(fdx, CV_32F);
+  dy.convertTo(fdy, CV_32F);
+  cv::magnitude(fdx, fdy, magnitude);
+  out.edge_map.direction = cv::Mat::zeros(image_gray8.size(), CV_32F);
+
+  const Intrinsics& k = camera.intrinsics();
+  const std::vector<std::vector<cv::Point>> chains = TraceChains(out.edge_map.edges);
+  std::vector<Eigen::Vector2d> points;
+  for (const std::vector<cv::Point>& chain : chains) {
+    points.clear();
+    std::optional<Eigen::Vector2d> last;
+    for (const cv::Point& p : chain) {
+      const float gx = fdx.at<float>(p), gy = fdy.at<float>(p);
+      const float m0 = magnitude.at<float>(p);
+      out.edge_map.direction.at<float>(p) = std::atan2(gy, gx);
+      // Sub-pixel: the peak of a parabola through the gradient magnitude across the edge.
+      Eigen::Vector2d pixel(p.x, p.y);
+      if (m0 > 0) {
+        const Eigen::Vector2d g(gx / m0, gy / m0);
+        const double mm = Sample(magnitude, p.x - g.x(), p.y - g.y());
+        const double mp = Sample(magnitude, p.x + g.x(), p.y + g.y());
+        const double denom = mm - 2.0 * m0 + mp;
+        if (denom < 0) pixel += g * std::clamp(0.5 * (mm - mp) / denom, -0.5, 0.5);
+      }
+      ++out.edge_points;
+      // Undistort (Newton, warm-started from the previous point of the chain).
+      const Eigen::Vector2d distorted((pixel.x() - k.cx) / k.fx, (pixel.y() - k.cy) / k.fy);
+      std::optional<Eigen::Vector2d> normalized =
+          last ? camera.Undistort(distorted, *last) : camera.Undistort(distorted);
+      if (!normalized) continue;
+      last = normalized;
+      points.emplace_back(k.fx * normalized->x() + k.cx, k.fy * normalized->y() + k.cy);
+    }
+    if (points.size() >= 4) SplitAndFit(points, 0, static_cast<int>(points.size()) - 1, options, &out.lines);
+  }
+  out.lines = MergeCollinear(std::move(out.lines));
+  return out;
+}
+
+std::vector<ImageLine> DetectLines(const cv::Mat& image_gray8, const Camera& camera,
+                                   const RecognizerOptions& options) {
+  return DetectLinesAndEdges(image_gray8, camera, options).lines;
+}
+
+}  // namespace teachsim::vision

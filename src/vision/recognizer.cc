@@ -1,0 +1,1054 @@
+// The recognizer (issue 7; paper §4.1-4.3, §7.1): index over model views (Beis & Lowe), hypotheses
+// from approximate nearest neighbours, Lowe's pose fit, verification, and the model editor's rules.
+#include "teachsim/vision/recognizer.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <opencv2/flann.hpp>
+#include <set>
+#include <sstream>
+
+#include "teachsim/base/json.h"
+#include "teachsim/vision/recognition_stages.h"
+
+namespace teachsim::vision {
+
+// ---------------------------------------------------------------- options and models
+
+Status RecognizerOptions::Validate() const {
+  auto positive = [](const char* name, double v) -> Status {
+    if (!(v > 0) || !std::isfinite(v)) {
+      return Status::InvalidInput(std::string("RecognizerOptions::") + name + " = " + json::FormatNumber(v) +
+                                  " must be > 0");
+    }
+    return Status::Ok();
+  };
+  auto fraction = [](const char* name, double v) -> Status {
+    if (!(v >= 0 && v <= 1)) {
+      return Status::InvalidInput(std::string("RecognizerOptions::") + name + " = " + json::FormatNumber(v) +
+                                  " must be in [0, 1]");
+    }
+    return Status::Ok();
+  };
+  TEACHSIM_RETURN_IF_ERROR(positive("canny_low", canny_low));
+  TEACHSIM_RETURN_IF_ERROR(positive("canny_high", canny_high));
+  if (canny_high < canny_low) {
+    return Status::InvalidInput("RecognizerOptions::canny_high = " + json::FormatNumber(canny_high) +
+                                " must be >= canny_low = " + json::FormatNumber(canny_low));
+  }
+  TEACHSIM_RETURN_IF_ERROR(positive("min_segment_length_px", min_segment_length_px));
+  TEACHSIM_RETURN_IF_ERROR(positive("split_tolerance_px", split_tolerance_px));
+  TEACHSIM_RETURN_IF_ERROR(positive("junction_gap_px", junction_gap_px));
+  TEACHSIM_RETURN_IF_ERROR(positive("view_sphere_samples", view_sphere_samples));
+  if (view_distances_m.empty()) return Status::InvalidInput("RecognizerOptions::view_distances_m must not be empty");
+  for (double d : view_distances_m) TEACHSIM_RETURN_IF_ERROR(positive("view_distances_m[]", d));
+  TEACHSIM_RETURN_IF_ERROR(positive("neighbours", neighbours));
+  TEACHSIM_RETURN_IF_ERROR(positive("max_checks", max_checks));
+  TEACHSIM_RETURN_IF_ERROR(positive("max_hypotheses", max_hypotheses));
+  TEACHSIM_RETURN_IF_ERROR(positive("max_iterations", max_iterations));
+  if (!(huber_px >= 0)) return Status::InvalidInput("RecognizerOptions::huber_px must be >= 0 (0: plain least squares)");
+  TEACHSIM_RETURN_IF_ERROR(positive("match_distance_px", match_distance_px));
+  TEACHSIM_RETURN_IF_ERROR(positive("match_angle_deg", match_angle_deg));
+  TEACHSIM_RETURN_IF_ERROR(fraction("min_matched_edge_fraction", min_matched_edge_fraction));
+  TEACHSIM_RETURN_IF_ERROR(fraction("min_score", min_score));
+  TEACHSIM_RETURN_IF_ERROR(fraction("min_coverage", min_coverage));
+  if (!(min_edge_contrast >= 0)) return Status::InvalidInput("RecognizerOptions::min_edge_contrast must be >= 0");
+  TEACHSIM_RETURN_IF_ERROR(positive("max_reprojection_rms_px", max_reprojection_rms_px));
+  TEACHSIM_RETURN_IF_ERROR(positive("work_area_radius_m", work_area_radius_m));
+  TEACHSIM_RETURN_IF_ERROR(positive("support_tolerance_m", support_tolerance_m));
+  if (!(below_table_tolerance_m >= 0)) return Status::InvalidInput("RecognizerOptions::below_table_tolerance_m must be >= 0");
+  if (!(table_snap_distance_m >= 0)) return Status::InvalidInput("RecognizerOptions::table_snap_distance_m must be >= 0");
+  if (!(table_snap_max_tilt_deg >= 0 && table_snap_max_tilt_deg < 45)) {
+    return Status::InvalidInput("RecognizerOptions::table_snap_max_tilt_deg = " +
+                                json::FormatNumber(table_snap_max_tilt_deg) + " must be in [0, 45)");
+  }
+  return Status::Ok();
+}
+
+namespace {
+
+Status AddModel(ModelLibrary* library, const std::string& name, const Eigen::Vector3d& size, const std::string& where) {
+  for (const Model& m : library->models) {
+    if (m.name != name) continue;
+    if ((m.box_size_m - size).norm() > 1e-9) {
+      return Status::InvalidInput(where + ": model \"" + name + "\" is given twice with different sizes");
+    }
+    return Status::Ok();
+  }
+  library->models.push_back({name, size});
+  return Status::Ok();
+}
+
+}  // namespace
+
+Result<ModelLibrary> LoadModels(const std::string& path) {
+  TEACHSIM_ASSIGN_OR_RETURN(json::Json document, json::ReadFile(path));
+  ModelLibrary library;
+  if (document.is_object() && document.contains("models")) {
+    return json::Decode<ModelLibrary>(document, path, [&](const json::Reader& root) {
+      root.RejectUnknownKeys({"models"});
+      const json::Reader models = root.At("models");
+      if (models.Size() == 0) throw json::ParseError(models.where() + ": must hold at least one model");
+      for (std::size_t i = 0; i < models.Size(); ++i) {
+        const json::Reader m = models.Index(i);
+        m.RejectUnknownKeys({"name", "shape"});
+        const std::string name = m.At("name").NonEmptyString();
+        const scene::ShapeSpec spec = scene::ReadShapeSpec(m.At("shape"));
+        if (spec.kind != scene::ShapeSpec::Kind::kBox) {
+          throw json::ParseError(m.At("shape").where() + ": the recognizer's models are boxes ({\"box\": [sx, sy, sz]})");
+        }
+        Status s = AddModel(&library, name, spec.box_size, m.where());
+        if (!s.ok()) throw json::ParseError(s.message());
+      }
+      return library;
+    });
+  }
+  // A scene: its movable box-shaped objects.
+  auto scene_result = scene::ParseScene(document, path);
+  if (!scene_result.ok()) return scene_result.status();
+  for (size_t i = 0; i < scene_result->objects.size(); ++i) {
+    const scene::SceneObject& o = scene_result->objects[i];
+    if (o.fixed || o.shape_spec.kind != scene::ShapeSpec::Kind::kBox) continue;
+    TEACHSIM_RETURN_IF_ERROR(AddModel(&library, o.model.empty() ? o.name : o.model, o.shape_spec.box_size,
+                                      path + ": objects[" + std::to_string(i) + "]"));
+  }
+  if (library.models.empty()) {
+    return Status::InvalidInput(path + ": objects: the scene has no movable box-shaped object to use as a model");
+  }
+  return library;
+}
+
+namespace {
+
+uint64_t Fnv(uint64_t h, const void* data, size_t n) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ULL;
+  return h;
+}
+
+// Bump when the index's contents or file layout change.
+constexpr uint32_t kIndexFormat = 3;
+
+}  // namespace
+
+uint64_t HashModelLibrary(const ModelLibrary& models) {
+  uint64_t h = 14695981039346656037ULL;
+  for (const Model& m : models.models) {
+    h = Fnv(h, m.name.data(), m.name.size() + 1);
+    h = Fnv(h, m.box_size_m.data(), sizeof(double) * 3);
+  }
+  return h;
+}
+
+// ---------------------------------------------------------------- symmetry
+
+namespace {
+
+// The rotations that map a box of this size onto itself: signed permutations with det +1 that
+// only exchange axes of equal length.
+std::vector<Eigen::Matrix3d> BoxSymmetries(const Eigen::Vector3d& size) {
+  std::vector<Eigen::Matrix3d> out;
+  int perm[3] = {0, 1, 2};
+  do {
+    for (int signs = 0; signs < 8; ++signs) {
+      Eigen::Matrix3d s = Eigen::Matrix3d::Zero();
+      bool ok = true;
+      for (int i = 0; i < 3; ++i) {
+        s(i, perm[i]) = (signs >> i & 1) ? -1 : 1;
+        if (std::abs(size[i] - size[perm[i]]) > 1e-6 * size.maxCoeff()) ok = false;
+      }
+      if (ok && s.determinant() > 0) out.push_back(s);
+    }
+  } while (std::next_permutation(perm, perm + 3));
+  return out;
+}
+
+}  // namespace
+
+double SymmetricRotationAngle(const Model& model, const geometry::Pose3& a, const geometry::Pose3& b) {
+  const Eigen::Matrix3d ra = a.RotationMatrix(), rb = b.RotationMatrix();
+  double best = M_PI;
+  for (const Eigen::Matrix3d& s : BoxSymmetries(model.box_size_m)) {
+    const Eigen::Quaterniond d((ra * s).transpose() * rb);
+    best = std::min(best, 2 * std::atan2(d.vec().norm(), std::abs(d.w())));  // precise near 0, unlike acos
+  }
+  return best;
+}
+
+// ---------------------------------------------------------------- the index (item 3)
+
+struct IndexEntry {
+  uint16_t model = 0;
+  uint16_t view = 0;
+  uint8_t vertices[5] = {0, 0, 0, 0, 0};  // the group's points as box vertex ids (see Group)
+};
+
+struct RecognizerIndex {
+  std::vector<geometry::Pose3> views;  // camera_T_object of each view
+  std::vector<IndexEntry> entries[kGroupKinds];
+  cv::Mat vectors[kGroupKinds];  // CV_32F, one row per entry
+  std::shared_ptr<cv::flann::Index> trees[kGroupKinds];
+  size_t size() const {
+    size_t n = 0;
+    for (const auto& e : entries) n += e.size();
+    return n;
+  }
+};
+
+namespace {
+
+constexpr double kNominalFocalPx = 800;  // for the model views' 2D geometry (scale drops out)
+constexpr double kMinViewAngleDeg = 20;  // junction angles below this are not indexed (the image side accepts 15)
+
+geometry::Pose3 LookAt(const Eigen::Vector3d& direction_from_object, double distance_m) {
+  const Eigen::Vector3d z = -direction_from_object.normalized();
+  Eigen::Vector3d helper = std::abs(z.z()) < 0.9 ? Eigen::Vector3d::UnitZ() : Eigen::Vector3d::UnitX();
+  const Eigen::Vector3d x = helper.cross(z).normalized();
+  const Eigen::Vector3d y = z.cross(x);
+  Eigen::Matrix3d object_R_camera;
+  object_R_camera << x, y, z;
+  const Eigen::Matrix3d camera_R_object = object_R_camera.transpose();
+  return {Eigen::Quaterniond(camera_R_object), Eigen::Vector3d(0, 0, distance_m)};
+}
+
+void AddViewGroups(const Model& model, uint16_t model_index, uint16_t view_index, const geometry::Pose3& camera_T_object,
+                   RecognizerIndex* index, std::vector<float> vectors[kGroupKinds]) {
+  const Eigen::Vector3d camera_in_object = camera_T_object.Inverse().translation;
+  const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_in_object);
+  Eigen::Vector2d px[8];
+  for (int i = 0; i < 8; ++i) {
+    const Eigen::Vector3d p = camera_T_object * BoxVertex(model.box_size_m, i);
+    px[i] = kNominalFocalPx * p.head<2>() / p.z();
+  }
+  double longest = 0;
+  for (int e = 0; e < 12; ++e) {
+    if (visible >> e & 1) longest = std::max(longest, (px[kBoxEdges[e][0]] - px[kBoxEdges[e][1]]).norm());
+  }
+  // Usable edges: visible and not seen nearly end-on (the image would not show them as segments).
+  bool adjacent[8][8] = {};
+  for (int e = 0; e < 12; ++e) {
+    const int a = kBoxEdges[e][0], b = kBoxEdges[e][1];
+    if ((visible >> e & 1) && (px[a] - px[b]).norm() >= 0.15 * longest) adjacent[a][b] = adjacent[b][a] = true;
+  }
+  const double min_sin = std::sin(kMinViewAngleDeg * M_PI / 180);
+  auto good_corner = [&](int a, int b, int c) {  // lines a-b and b-c meet at an angle
+    const Eigen::Vector2d u = (px[a] - px[b]).normalized(), v = (px[c] - px[b]).normalized();
+    return std::abs(u.x() * v.y() - u.y() * v.x()) >= min_sin;
+  };
+  auto add = [&](GroupKind kind, const int* verts, int count) {
+    Group g;
+    g.kind = kind;
+    IndexEntry entry;
+    entry.model = model_index;
+    entry.view = view_index;
+    for (int k = 0; k < count; ++k) {
+      g.points[static_cast<size_t>(k)] = px[verts[k]];
+      entry.vertices[k] = static_cast<uint8_t>(verts[k]);
+    }
+    const std::vector<float> v = IndexVector(g);
+    const int ki = static_cast<int>(kind);
+    vectors[ki].insert(vectors[ki].end(), v.begin(), v.end());
+    index->entries[ki].push_back(entry);
+  };
+  // Chains of 3 and 4 edges: simple paths in the visible-edge graph, both directions.
+  int path[5];
+  auto dfs = [&](auto&& self, int depth) -> void {
+    if (depth == 4) add(GroupKind::kChain3, path, 4);
+    if (depth == 5) {
+      add(GroupKind::kChain4, path, 5);
+      return;
+    }
+    const int last = path[depth - 1];
+    for (int next = 0; next < 8; ++next) {
+      if (!adjacent[last][next]) continue;
+      bool used = false;
+      for (int k = 0; k < depth; ++k) used = used || path[k] == next;
+      if (used) continue;
+      if (depth >= 2 && !good_corner(path[depth - 2], last, next)) continue;
+      path[depth] = next;
+      self(self, depth + 1);
+    }
+  };
+  for (int v = 0; v < 8; ++v) {
+    path[0] = v;
+    dfs(dfs, 1);
+  }
+  // Forks: vertices with three usable edges, arms ordered by image angle, every cyclic start.
+  for (int v = 0; v < 8; ++v) {
+    std::vector<std::pair<double, int>> arms;
+    for (int w = 0; w < 8; ++w) {
+      if (adjacent[v][w]) arms.push_back({std::atan2((px[w] - px[v]).y(), (px[w] - px[v]).x()), w});
+    }
+    if (arms.size() != 3) continue;
+    if (!good_corner(arms[0].second, v, arms[1].second) || !good_corner(arms[1].second, v, arms[2].second) ||
+        !good_corner(arms[0].second, v, arms[2].second)) {
+      continue;
+    }
+    std::sort(arms.begin(), arms.end());
+    for (int start = 0; start < 3; ++start) {
+      const int verts[4] = {v, arms[static_cast<size_t>(start)].second, arms[static_cast<size_t>((start + 1) % 3)].second,
+                            arms[static_cast<size_t>((start + 2) % 3)].second};
+      add(GroupKind::kFork3, verts, 4);
+    }
+  }
+}
+
+std::shared_ptr<RecognizerIndex> BuildIndex(const ModelLibrary& library, const RecognizerOptions& options) {
+  auto index = std::make_shared<RecognizerIndex>();
+  std::vector<float> vectors[kGroupKinds];
+  // Directions over the sphere (Fibonacci lattice). The box's symmetry (pi about each axis) makes
+  // views from the quarter x >= 0, z >= 0 enough; the others give the same images.
+  const int n = options.view_sphere_samples;
+  std::vector<Eigen::Vector3d> directions;
+  for (int i = 0; i < n; ++i) {
+    const double z = 1 - (i + 0.5) * 2.0 / n;
+    const double r = std::sqrt(std::max(0.0, 1 - z * z));
+    const double phi = i * M_PI * (3 - std::sqrt(5.0));
+    const Eigen::Vector3d d(r * std::cos(phi), r * std::sin(phi), z);
+    if (d.x() >= 0 && d.z() >= 0) directions.push_back(d);
+  }
+  for (size_t m = 0; m < library.models.size(); ++m) {
+    for (double distance : options.view_distances_m) {
+      for (const Eigen::Vector3d& d : directions) {
+        const geometry::Pose3 camera_T_object = LookAt(d, distance);
+        const auto view = static_cast<uint16_t>(index->views.size());
+        index->views.push_back(camera_T_object);
+        AddViewGroups(library.models[m], static_cast<uint16_t>(m), view, camera_T_object, index.get(), vectors);
+      }
+    }
+  }
+  for (int k = 0; k < kGroupKinds; ++k) {
+    const int dim = GroupDimension(static_cast<GroupKind>(k));
+    index->vectors[k] = cv::Mat(static_cast<int>(index->entries[k].size()), dim, CV_32F);
+    if (!vectors[k].empty()) std::memcpy(index->vectors[k].data, vectors[k].data(), vectors[k].size() * sizeof(float));
+  }
+  return index;
+}
+
+void BuildTrees(RecognizerIndex* index) {
+  for (int k = 0; k < kGroupKinds; ++k) {
+    if (index->vectors[k].rows == 0) continue;
+    // FLANN's randomized kd-trees with priority search: the descendant of Beis & Lowe's best-bin-first.
+    index->trees[k] = std::make_shared<cv::flann::Index>(index->vectors[k], cv::flann::KDTreeIndexParams(4),
+                                                         cvflann::FLANN_DIST_L2);
+  }
+}
+
+uint64_t IndexKey(const ModelLibrary& library, const RecognizerOptions& options) {
+  uint64_t h = HashModelLibrary(library);
+  h = Fnv(h, &kIndexFormat, sizeof(kIndexFormat));
+  h = Fnv(h, &options.view_sphere_samples, sizeof(int));
+  for (double d : options.view_distances_m) h = Fnv(h, &d, sizeof(double));
+  return h;
+}
+
+template <typename T>
+void Put(std::string* out, const T& value) {
+  out->append(reinterpret_cast<const char*>(&value), sizeof(T));
+}
+template <typename T>
+bool Get(std::istream& in, T* value) {
+  return static_cast<bool>(in.read(reinterpret_cast<char*>(value), sizeof(T)));
+}
+
+constexpr char kMagic[8] = {'T', 'S', 'R', 'I', 'N', 'D', 'E', 'X'};
+
+Status SaveIndex(const RecognizerIndex& index, uint64_t key, const std::string& path) {
+  std::string out;
+  out.append(kMagic, 8);
+  Put(&out, key);
+  Put(&out, static_cast<uint64_t>(index.views.size()));
+  for (const geometry::Pose3& v : index.views) {
+    const double q[7] = {v.rotation.w(), v.rotation.x(), v.rotation.y(), v.rotation.z(),
+                         v.translation.x(), v.translation.y(), v.translation.z()};
+    out.append(reinterpret_cast<const char*>(q), sizeof(q));
+  }
+  for (int k = 0; k < kGroupKinds; ++k) {
+    Put(&out, static_cast<uint64_t>(index.entries[k].size()));
+    out.append(reinterpret_cast<const char*>(index.entries[k].data()), index.entries[k].size() * sizeof(IndexEntry));
+    out.append(reinterpret_cast<const char*>(index.vectors[k].data),
+               index.vectors[k].total() * index.vectors[k].elemSize());
+  }
+  return json::WriteFileAtomic(path, out);
+}
+
+std::shared_ptr<RecognizerIndex> LoadIndex(const std::string& path, uint64_t key) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return nullptr;
+  char magic[8];
+  uint64_t stored_key = 0, views = 0;
+  if (!in.read(magic, 8) || std::memcmp(magic, kMagic, 8) != 0 || !Get(in, &stored_key) || stored_key != key ||
+      !Get(in, &views) || views > 1000000) {
+    return nullptr;
+  }
+  auto index = std::make_shared<RecognizerIndex>();
+  for (uint64_t i = 0; i < views; ++i) {
+    double q[7];
+    if (!in.read(reinterpret_cast<char*>(q), sizeof(q))) return nullptr;
+    index->views.emplace_back(Eigen::Quaterniond(q[0], q[1], q[2], q[3]), Eigen::Vector3d(q[4], q[5], q[6]));
+  }
+  for (int k = 0; k < kGroupKinds; ++k) {
+    uint64_t n = 0;
+    if (!Get(in, &n) || n > 100000000) return nullptr;
+    index->entries[k].resize(n);
+    if (!in.read(reinterpret_cast<char*>(index->entries[k].data()), static_cast<std::streamsize>(n * sizeof(IndexEntry)))) {
+      return nullptr;
+    }
+    const int dim = GroupDimension(static_cast<GroupKind>(k));
+    index->vectors[k] = cv::Mat(static_cast<int>(n), dim, CV_32F);
+    if (!in.read(reinterpret_cast<char*>(index->vectors[k].data), static_cast<std::streamsize>(n * dim * sizeof(float)))) {
+      return nullptr;
+    }
+  }
+  return index;
+}
+
+}  // namespace
+
+size_t Recognizer::index_size() const { return index_ ? index_->size() : 0; }
+
+Result<Recognizer> Recognizer::Create(const ModelLibrary& models, const RecognizerOptions& options,
+                                      const std::string& cache_dir) {
+  TEACHSIM_RETURN_IF_ERROR(options.Validate());
+  if (models.models.empty()) return Status::InvalidInput("model library: no models");
+  if (models.models.size() > 65535) return Status::InvalidInput("model library: more than 65535 models");
+  for (const Model& m : models.models) {
+    if (!(m.box_size_m.array() > 0).all() || !m.box_size_m.allFinite()) {
+      return Status::InvalidInput("model library: model \"" + m.name + "\": box sides must be finite and > 0");
+    }
+  }
+  Recognizer r;
+  r.models_ = models;
+  r.options_ = options;
+  const uint64_t key = IndexKey(models, options);
+  std::string path;
+  std::shared_ptr<RecognizerIndex> index;
+  if (!cache_dir.empty()) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "recognizer-index-%016llx.bin", static_cast<unsigned long long>(key));
+    path = (std::filesystem::path(cache_dir) / name).string();
+    index = LoadIndex(path, key);
+    r.loaded_from_cache_ = index != nullptr;
+  }
+  if (!index) {
+    index = BuildIndex(models, options);
+    if (!path.empty()) {
+      std::error_code ec;
+      std::filesystem::create_directories(cache_dir, ec);
+      if (ec) return Status::IoError(cache_dir + ": cannot create the index cache folder: " + ec.message());
+      TEACHSIM_RETURN_IF_ERROR(SaveIndex(*index, key, path));
+    }
+  }
+  BuildTrees(index.get());
+  r.index_ = index;
+  return r;
+}
+
+// ---------------------------------------------------------------- recognition
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
+
+struct Hypothesis {
+  double probability = 0;
+  int group = 0;
+  int kind = 0;
+  int entry = 0;
+};
+
+struct EdgeMatchSet {
+  std::vector<LineMatch> matches;
+  std::vector<int> segments;      // the image line of each match
+  double matched_fraction = 0;    // of the visible predicted length
+  double visible_length_px = 0;
+};
+
+// Matches image lines to the predicted visible edges of a box at a pose (undistorted px).
+EdgeMatchSet MatchEdges(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_object,
+                        const std::vector<ImageLine>& lines, double max_distance_px, double max_angle_rad) {
+  EdgeMatchSet out;
+  const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
+  Eigen::Vector2d px[8];
+  for (int i = 0; i < 8; ++i) {
+    const Eigen::Vector3d p = K * (camera_T_object * BoxVertex(model.box_size_m, i));
+    px[i] = p.head<2>() / std::max(p.z(), 1e-9);
+  }
+  struct EdgeGeom {
+    int e;
+    Eigen::Vector2d a, dir, n;
+    double length;
+    double covered = 0;
+  };
+  std::vector<EdgeGeom> edges;
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    const Eigen::Vector2d a = px[kBoxEdges[e][0]], b = px[kBoxEdges[e][1]];
+    const double len = (b - a).norm();
+    if (len < 3) continue;
+    const Eigen::Vector2d dir = (b - a) / len;
+    edges.push_back({e, a, dir, {-dir.y(), dir.x()}, len});
+    out.visible_length_px += len;
+  }
+  const double cos_max = std::cos(max_angle_rad);
+  for (size_t s = 0; s < lines.size(); ++s) {
+    const ImageLine& l = lines[s];
+    const double len = l.Length();
+    const Eigen::Vector2d ldir = (l.b - l.a) / len;
+    int best = -1;
+    double best_d = 1e300, best_overlap = 0;
+    for (size_t k = 0; k < edges.size(); ++k) {
+      const EdgeGeom& g = edges[k];
+      if (std::abs(ldir.dot(g.dir)) < cos_max) continue;
+      const double da = std::abs(g.n.dot(l.a - g.a)), db = std::abs(g.n.dot(l.b - g.a));
+      if (da > max_distance_px || db > max_distance_px) continue;
+      const double ta = g.dir.dot(l.a - g.a), tb = g.dir.dot(l.b - g.a);
+      const double overlap = std::min(std::max(ta, tb), g.length) - std::max(std::min(ta, tb), 0.0);
+      if (overlap < 0.5 * len) continue;
+      if (da + db < best_d) best = static_cast<int>(k), best_d = da + db, best_overlap = overlap;
+    }
+    if (best < 0) continue;
+    edges[static_cast<size_t>(best)].covered += best_overlap;
+    out.matches.push_back({edges[static_cast<size_t>(best)].e, l.a, l.b});
+    out.segments.push_back(static_cast<int>(s));
+  }
+  double covered = 0;
+  for (const EdgeGeom& g : edges) covered += std::min(g.covered, g.length);
+  out.matched_fraction = out.visible_length_px > 0 ? covered / out.visible_length_px : 0;
+  return out;
+}
+
+// Edge support along the predicted outline and inner edges, in the distorted image: a sample point
+// is supported by a Canny edge within 2 px across the edge whose gradient is across the edge. Where
+// the image shows no contrast across the predicted edge (a lit face against the lit table) no edge
+// can be expected: such samples are uninformative and left out of `fraction` (but not `coverage`).
+struct Support {
+  double fraction = 0;      // supported / informative samples
+  double coverage = 0;      // supported / all samples
+  double supported_px = 0;  // supported length
+  int samples = 0;
+};
+float SampleGrey(const cv::Mat& m, const Eigen::Vector2d& p) {
+  const double x = std::clamp(p.x(), 0.0, m.cols - 1.001), y = std::clamp(p.y(), 0.0, m.rows - 1.001);
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const double fx = x - x0, fy = y - y0;
+  return static_cast<float>((1 - fy) * ((1 - fx) * m.at<uint8_t>(y0, x0) + fx * m.at<uint8_t>(y0, x0 + 1)) +
+                            fy * ((1 - fx) * m.at<uint8_t>(y0 + 1, x0) + fx * m.at<uint8_t>(y0 + 1, x0 + 1)));
+}
+Support EdgeSupport(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                    const EdgeMap& edge_map, double min_contrast) {
+  Support out;
+  const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
+  const double cos_tol = std::cos(25 * M_PI / 180);
+  constexpr double kSpacingPx = 2.5, kContrastOffsetPx = 2.5;
+  int supported = 0, informative = 0;
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    const Eigen::Vector3d p = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][0]);
+    const Eigen::Vector3d q = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][1]);
+    const auto pp = camera.ProjectFromCamera(p), pq = camera.ProjectFromCamera(q);
+    if (!pp || !pq) continue;
+    const int n = std::max(4, static_cast<int>(((*pq - *pp).norm()) / kSpacingPx));
+    for (int i = 0; i < n; ++i) {
+      // Skip the ends (corners blur and shadows meet there).
+      const double t = 0.08 + 0.84 * (i + 0.5) / n;
+      const auto c = camera.ProjectFromCamera(p + t * (q - p));
+      const auto c2 = camera.ProjectFromCamera(p + (t + 0.01) * (q - p));
+      if (!c || !c2 || !camera.InImage(*c)) continue;
+      const Eigen::Vector2d along = (*c2 - *c).normalized();
+      const Eigen::Vector2d normal(-along.y(), along.x());
+      ++out.samples;
+      bool ok = false;
+      for (int o = 0; o <= 4 && !ok; ++o) {
+        const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
+        const int x = static_cast<int>(std::lround(c->x() + offset * normal.x()));
+        const int y = static_cast<int>(std::lround(c->y() + offset * normal.y()));
+        if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
+        if (!edge_map.edges.at<uint8_t>(y, x)) continue;
+        const float a = edge_map.direction.at<float>(y, x);
+        ok = std::abs(std::cos(a) * normal.x() + std::sin(a) * normal.y()) >= cos_tol;
+      }
+      if (ok) {
+        ++supported;
+        ++informative;
+      } else if (std::abs(SampleGrey(edge_map.smoothed, *c + kContrastOffsetPx * normal) -
+                          SampleGrey(edge_map.smoothed, *c - kContrastOffsetPx * normal)) >= min_contrast) {
+        ++informative;
+      }
+    }
+  }
+  out.fraction = informative > 0 ? static_cast<double>(supported) / informative : 0;
+  out.coverage = out.samples > 0 ? static_cast<double>(supported) / out.samples : 0;
+  out.supported_px = supported * kSpacingPx;
+  return out;
+}
+
+struct Candidate {
+  int model = 0;
+  geometry::Pose3 camera_T_object;
+  FitResult fit;
+  EdgeMatchSet matches;
+  Support support;
+  double rms_px = 0;
+};
+
+// The initial pose of a hypothesis: the model view's pose turned and scaled by the 2D similarity
+// that maps the view's group onto the image group (weak perspective), then re-aimed at the group.
+geometry::Pose3 InitialPose(const RecognizerIndex& index, const Model& model, const IndexEntry& entry, const Group& group,
+                            const Eigen::Matrix3d& K) {
+  const geometry::Pose3& view = index.views[entry.view];
+  const int count = group.kind == GroupKind::kChain4 ? 5 : 4;
+  std::complex<double> q[5], p[5];
+  double w[5];
+  for (int k = 0; k < count; ++k) {
+    const Eigen::Vector3d v = view * BoxVertex(model.box_size_m, entry.vertices[k]);
+    q[k] = {v.x() / v.z(), v.y() / v.z()};
+    const Eigen::Vector2d& g = group.points[static_cast<size_t>(k)];
+    p[k] = {(g.x() - K(0, 2)) / K(0, 0), (g.y() - K(1, 2)) / K(1, 1)};
+    // Junctions are reliable, free ends less so.
+    const bool junction = group.kind == GroupKind::kFork3 ? k == 0 : (k > 0 && k < count - 1);
+    w[k] = junction ? 1.0 : 0.5;
+  }
+  std::complex<double> qm = 0, pm = 0;
+  double ws = 0;
+  for (int k = 0; k < count; ++k) qm += w[k] * q[k], pm += w[k] * p[k], ws += w[k];
+  qm /= ws;
+  pm /= ws;
+  std::complex<double> num = 0;
+  double den = 0;
+  for (int k = 0; k < count; ++k) {
+    num += w[k] * std::conj(q[k] - qm) * (p[k] - pm);
+    den += w[k] * std::norm(q[k] - qm);
+  }
+  const std::complex<double> z = den > 0 ? num / den : std::complex<double>(1, 0);
+  const std::complex<double> t = pm - z * qm;  // where the view's centre (0, 0) goes
+  const double scale = std::max(std::abs(z), 1e-6), theta = std::arg(z);
+  const Eigen::Vector3d ray = Eigen::Vector3d(t.real(), t.imag(), 1).normalized();
+  const Eigen::Quaterniond align = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), ray);
+  const Eigen::Quaterniond roll(Eigen::AngleAxisd(theta, Eigen::Vector3d::UnitZ()));
+  return {(align * roll * view.rotation).normalized(), ray * (view.translation.z() / scale)};
+}
+
+std::vector<Eigen::Vector3d> BoxWorldVertices(const Model& model, const geometry::Pose3& world_T_object) {
+  std::vector<Eigen::Vector3d> v;
+  for (int i = 0; i < 8; ++i) v.push_back(world_T_object * BoxVertex(model.box_size_m, i));
+  return v;
+}
+
+// A fixed object's convex part in the world, for the separating-axis test.
+struct FixedPart {
+  std::string name;
+  std::vector<Eigen::Vector3d> vertices;
+  std::vector<Eigen::Vector3d> normals, edge_dirs;
+};
+
+Penetration PartPenetration(const Model& model, const geometry::Pose3& world_T_object, const FixedPart& part,
+                            bool horizontal_only) {
+  std::vector<Eigen::Vector3d> axes = part.normals;
+  const Eigen::Matrix3d r = world_T_object.RotationMatrix();
+  for (int i = 0; i < 3; ++i) {
+    axes.push_back(r.col(i));
+    for (const Eigen::Vector3d& d : part.edge_dirs) axes.push_back(r.col(i).cross(d));
+  }
+  if (horizontal_only) {
+    for (Eigen::Vector3d& a : axes) a.z() = 0;
+  }
+  return VertexSetPenetration(BoxWorldVertices(model, world_T_object), part.vertices, axes);
+}
+
+std::string Mm(double m) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.1f mm", m * 1000);
+  return buf;
+}
+
+}  // namespace
+
+PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                          const LineDetection& detection, const RecognizerOptions& options) {
+  PoseEvidence out;
+  const EdgeMatchSet set = MatchEdges(model, camera.K(), camera_T_object, detection.lines, options.match_distance_px,
+                                      options.match_angle_deg * M_PI / 180);
+  out.matched_fraction = set.matched_fraction;
+  out.matches = static_cast<int>(set.matches.size());
+  if (!set.matches.empty()) out.rms_px = FitPoseToLines(model.box_size_m, camera.K(), camera_T_object, set.matches, 0, 0).rms_px;
+  const Support support = EdgeSupport(model, camera, camera_T_object, detection.edge_map, options.min_edge_contrast);
+  out.support_fraction = support.fraction;
+  out.coverage = support.coverage;
+  out.supported_px = support.supported_px;
+  return out;
+}
+
+Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, const Camera& camera,
+                                                const scene::Scene* fixed_world) const {
+  if (image_gray8.empty() || image_gray8.type() != CV_8UC1) {
+    return Status::InvalidInput("Recognize: the image must be 8-bit monochrome (CV_8UC1)");
+  }
+  if (image_gray8.cols != camera.width() || image_gray8.rows != camera.height()) {
+    return Status::InvalidInput("Recognize: the image is " + std::to_string(image_gray8.cols) + "x" +
+                                std::to_string(image_gray8.rows) + " but the camera is " +
+                                std::to_string(camera.width()) + "x" + std::to_string(camera.height()));
+  }
+  RecognitionResult result;
+  const RecognizerIndex& index = *index_;
+  const Eigen::Matrix3d K = camera.K();
+  const auto t0 = Clock::now();
+
+  // 1. lines
+  const LineDetection detection = DetectLinesAndEdges(image_gray8, camera, options_);
+  const std::vector<ImageLine>& lines = detection.lines;
+  const auto t1 = Clock::now();
+
+  // 2. groups
+  const std::vector<Group> groups = FindGroups(lines, options_);
+  const auto t2 = Clock::now();
+
+  // 3. indexing: k nearest model-view vectors per group; votes give p(model | group) (Beis & Lowe).
+  std::vector<Hypothesis> hypotheses;
+  {
+    constexpr double kSigma = 0.12;            // spread of an index vector's error (rad / weighted log ratio)
+    constexpr double kBackgroundDistance = 0.3;  // a neighbour this far is as likely as clutter
+    const double background = std::exp(-kBackgroundDistance * kBackgroundDistance / (2 * kSigma * kSigma));
+    for (int k = 0; k < kGroupKinds; ++k) {
+      if (!index.trees[k]) continue;
+      std::vector<int> members;
+      for (size_t g = 0; g < groups.size(); ++g) {
+        if (static_cast<int>(groups[g].kind) == k) members.push_back(static_cast<int>(g));
+      }
+      if (members.empty()) continue;
+      const int dim = GroupDimension(static_cast<GroupKind>(k));
+      cv::Mat queries(static_cast<int>(members.size()), dim, CV_32F);
+      for (size_t i = 0; i < members.size(); ++i) {
+        const std::vector<float> v = IndexVector(groups[static_cast<size_t>(members[i])]);
+        std::memcpy(queries.ptr<float>(static_cast<int>(i)), v.data(), v.size() * sizeof(float));
+      }
+      const int knn = std::min(options_.neighbours, index.vectors[k].rows);
+      cv::Mat indices, dists;
+      index.trees[k]->knnSearch(queries, indices, dists, knn, cv::flann::SearchParams(options_.max_checks));
+      for (size_t i = 0; i < members.size(); ++i) {
+        const int* idx = indices.ptr<int>(static_cast<int>(i));
+        const float* d2 = dists.ptr<float>(static_cast<int>(i));
+        double total = background;
+        std::map<int, double> per_model;
+        std::vector<double> w(static_cast<size_t>(knn));
+        for (int j = 0; j < knn; ++j) {
+          if (idx[j] < 0) continue;
+          w[static_cast<size_t>(j)] = std::exp(-d2[j] / (2 * kSigma * kSigma));
+          total += w[static_cast<size_t>(j)];
+          per_model[index.entries[k][static_cast<size_t>(idx[j])].model] += w[static_cast<size_t>(j)];
+        }
+        for (int j = 0; j < knn; ++j) {
+          if (idx[j] < 0) continue;
+          const double p_model = per_model[index.entries[k][static_cast<size_t>(idx[j])].model] / total;
+          // The neighbour's own weight orders the views within a model.
+          const double p = p_model * w[static_cast<size_t>(j)] / std::max(w[0], 1e-300);
+          if (p < 1e-3) continue;
+          // Larger groups are more specific (paper §7.1): ties go to them.
+          hypotheses.push_back({p * (k == static_cast<int>(GroupKind::kChain4) ? 1.2 : 1.0), members[i], k, idx[j]});
+        }
+      }
+    }
+    std::stable_sort(hypotheses.begin(), hypotheses.end(),
+                     [](const Hypothesis& a, const Hypothesis& b) { return a.probability > b.probability; });
+  }
+  const auto t3 = Clock::now();
+
+  // Fixed world: the table top and the other fixed parts.
+  double table_top_z = 0;
+  std::vector<FixedPart> fixed_parts;
+  if (fixed_world != nullptr) {
+    for (const scene::SceneObject& o : fixed_world->objects) {
+      if (!o.fixed) continue;
+      if (o.name == "table") {
+        table_top_z = o.shape.WorldBounds(o.world_T_object).max.z();
+        continue;
+      }
+      for (const geometry::ShapePart& part : o.shape.parts()) {
+        const geometry::Pose3 world_T_part = o.world_T_object * part.shape_T_part;
+        FixedPart f;
+        f.name = o.name;
+        for (const Eigen::Vector3d& v : part.convex->vertices()) f.vertices.push_back(world_T_part * v);
+        for (const geometry::Face& face : part.convex->faces()) f.normals.push_back(world_T_part.Rotate(face.normal));
+        for (const geometry::Edge& e : part.convex->edges()) {
+          f.edge_dirs.push_back(world_T_part.Rotate(part.convex->vertices()[static_cast<size_t>(e.v1)] -
+                                                    part.convex->vertices()[static_cast<size_t>(e.v0)]).normalized());
+        }
+        if (f.vertices.size() > 0) fixed_parts.push_back(std::move(f));
+      }
+    }
+  }
+  const geometry::Pose3& world_T_camera = camera.world_T_camera();
+
+  // 4-5. pose fitting and verification of the most probable hypotheses.
+  std::vector<Candidate> candidates;
+  std::vector<bool> claimed(lines.size(), false);
+  std::vector<std::pair<int, geometry::Pose3>> tried;  // initial poses already fitted
+  const double match_angle = options_.match_angle_deg * M_PI / 180;
+  int fits = 0;
+  for (const Hypothesis& h : hypotheses) {
+    if (fits >= options_.max_hypotheses) break;
+    const Group& group = groups[static_cast<size_t>(h.group)];
+    const IndexEntry& entry = index.entries[h.kind][static_cast<size_t>(h.entry)];
+    const Model& model = models_.models[entry.model];
+    const int nseg = GroupSegments(group.kind);
+    bool all_claimed = true;
+    for (int s = 0; s < nseg; ++s) all_claimed = all_claimed && claimed[static_cast<size_t>(group.segments[static_cast<size_t>(s)])];
+    if (all_claimed) continue;
+    const geometry::Pose3 initial = InitialPose(index, model, entry, group, K);
+    if (!(initial.translation.z() > 0.05) || !initial.translation.allFinite()) continue;
+    bool seen = false;
+    for (const auto& [m, pose] : tried) {
+      if (m == entry.model && (pose.translation - initial.translation).norm() < 0.01 &&
+          SymmetricRotationAngle(model, pose, initial) < 8 * M_PI / 180) {
+        seen = true;
+        break;
+      }
+    }
+    if (seen) continue;
+    tried.push_back({entry.model, initial});
+    ++fits;
+
+    // The hypothesis' own correspondences first, then predicted edges' matches (Lowe 1991).
+    std::vector<LineMatch> matches;
+    for (int s = 0; s < nseg; ++s) {
+      int va, vb;
+      if (group.kind == GroupKind::kFork3) {
+        va = entry.vertices[0], vb = entry.vertices[s + 1];
+      } else {
+        va = entry.vertices[s], vb = entry.vertices[s + 1];
+      }
+      int edge = -1;
+      for (int e = 0; e < 12; ++e) {
+        if ((kBoxEdges[e][0] == va && kBoxEdges[e][1] == vb) || (kBoxEdges[e][0] == vb && kBoxEdges[e][1] == va)) edge = e;
+      }
+      TEACHSIM_CHECK(edge >= 0);
+      const ImageLine& l = lines[static_cast<size_t>(group.segments[static_cast<size_t>(s)])];
+      matches.push_back({edge, l.a, l.b});
+    }
+    FitResult fit = FitPoseToLines(model.box_size_m, K, initial, matches, 8, options_.huber_px);
+    EdgeMatchSet set;
+    bool failed = false;
+    for (int round = 0; round < 3; ++round) {
+      const double loose = round == 0 ? 3.0 : round == 1 ? 1.5 : 1.0;
+      set = MatchEdges(model, K, fit.camera_T_object, lines, loose * options_.match_distance_px, loose * match_angle);
+      if (set.matches.size() < 3 || fit.camera_T_object.translation.z() <= 0.05) {
+        failed = true;
+        break;
+      }
+      fit = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, set.matches, options_.max_iterations,
+                           options_.huber_px);
+    }
+    if (failed) continue;
+    set = MatchEdges(model, K, fit.camera_T_object, lines, options_.match_distance_px, match_angle);
+    if (set.matched_fraction < options_.min_matched_edge_fraction) continue;
+    // RMS of the matched segments against the final pose.
+    {
+      FitResult check = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, set.matches, 0, 0);
+      fit.rms_px = check.rms_px;
+    }
+    if (fit.rms_px > options_.max_reprojection_rms_px) continue;
+    const Support support = EdgeSupport(model, camera, fit.camera_T_object, detection.edge_map,
+                                        options_.min_edge_contrast);
+    if (support.fraction < options_.min_score || support.coverage < options_.min_coverage) continue;
+    // Culling (§7.1): outside the work site, under the table, inside a fixed object.
+    const geometry::Pose3 world_T_object = world_T_camera * fit.camera_T_object;
+    if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m) continue;
+    double zmin = 1e9;
+    for (const Eigen::Vector3d& v : BoxWorldVertices(model, world_T_object)) zmin = std::min(zmin, v.z());
+    if (zmin < table_top_z - options_.below_table_tolerance_m) continue;
+    bool inside_fixed = false;
+    for (const FixedPart& part : fixed_parts) {
+      inside_fixed = inside_fixed || PartPenetration(model, world_T_object, part, false).depth_m >
+                                         std::max(0.005, 0.2 * model.box_size_m.minCoeff());
+    }
+    if (inside_fixed) continue;
+    Candidate c;
+    c.model = entry.model;
+    c.camera_T_object = fit.camera_T_object;
+    c.fit = fit;
+    c.matches = set;
+    c.support = support;
+    c.rms_px = fit.rms_px;
+    for (int s : set.segments) claimed[static_cast<size_t>(s)] = true;
+    candidates.push_back(std::move(c));
+  }
+  const auto t4 = Clock::now();
+
+  // 5. consistency and non-maximum suppression: the best explained outline first; a candidate that
+  // deeply interpenetrates an accepted one or claims the same image edges is the same object or
+  // a wrong one.
+  std::vector<size_t> order(candidates.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return candidates[a].support.supported_px * candidates[a].support.fraction >
+           candidates[b].support.supported_px * candidates[b].support.fraction;
+  });
+  std::vector<size_t> accepted;
+  for (size_t i : order) {
+    const Candidate& c = candidates[i];
+    const Model& mc = models_.models[static_cast<size_t>(c.model)];
+    const geometry::Pose3 wc = world_T_camera * c.camera_T_object;
+    bool conflict = false;
+    for (size_t j : accepted) {
+      const Candidate& a = candidates[j];
+      const Model& ma = models_.models[static_cast<size_t>(a.model)];
+      const geometry::Pose3 wa = world_T_camera * a.camera_T_object;
+      const Penetration pen = BoxBoxPenetration(mc.box_size_m, wc, ma.box_size_m, wa, false);
+      if (pen.depth_m > 0.25 * std::min(mc.box_size_m.minCoeff(), ma.box_size_m.minCoeff())) conflict = true;
+      std::set<int> sa(a.matches.segments.begin(), a.matches.segments.end());
+      int shared = 0;
+      for (int s : c.matches.segments) shared += sa.count(s) ? 1 : 0;
+      if (shared * 3 > static_cast<int>(c.matches.segments.size())) conflict = true;
+      if (conflict) break;
+    }
+    if (!conflict) accepted.push_back(i);
+  }
+
+  // Culling what floats (§7.1: poses that cannot be real): each recognition rests on the table, on
+  // a fixed object's top or on another recognition's top (checked until nothing changes).
+  {
+    auto box_of = [&](size_t i) {
+      const Candidate& c = candidates[i];
+      return BoxWorldVertices(models_.models[static_cast<size_t>(c.model)], world_T_camera * c.camera_T_object);
+    };
+    struct Extent {
+      Eigen::Vector3d min, max;
+    };
+    auto extent = [](const std::vector<Eigen::Vector3d>& v) {
+      Extent e{v[0], v[0]};
+      for (const auto& p : v) e.min = e.min.cwiseMin(p), e.max = e.max.cwiseMax(p);
+      return e;
+    };
+    auto rests_on = [&](const Extent& a, const Extent& below) {
+      const bool overlap_xy = a.min.x() < below.max.x() && a.max.x() > below.min.x() && a.min.y() < below.max.y() &&
+                              a.max.y() > below.min.y();
+      return overlap_xy && std::abs(a.min.z() - below.max.z()) <= options_.support_tolerance_m;
+    };
+    std::vector<Extent> fixed_extents;
+    for (const FixedPart& part : fixed_parts) fixed_extents.push_back(extent(part.vertices));
+    std::vector<Extent> extents;
+    for (size_t i : accepted) extents.push_back(extent(box_of(i)));
+    std::vector<bool> supported(accepted.size(), false);
+    for (bool changed = true; changed;) {
+      changed = false;
+      for (size_t k = 0; k < accepted.size(); ++k) {
+        if (supported[k]) continue;
+        bool ok = std::abs(extents[k].min.z() - table_top_z) <= options_.support_tolerance_m;
+        for (const Extent& f : fixed_extents) ok = ok || rests_on(extents[k], f);
+        for (size_t j = 0; j < accepted.size(); ++j) ok = ok || (supported[j] && j != k && rests_on(extents[k], extents[j]));
+        if (ok) supported[k] = changed = true;
+      }
+    }
+    std::vector<size_t> kept;
+    for (size_t k = 0; k < accepted.size(); ++k) {
+      if (supported[k]) kept.push_back(accepted[k]);
+    }
+    accepted = kept;
+  }
+
+  // 6. the model editor's rules (§4.3).
+  for (size_t i : accepted) {
+    const Candidate& c = candidates[i];
+    const Model& model = models_.models[static_cast<size_t>(c.model)];
+    Recognition r;
+    r.model = model.name;
+    r.raw_world_T_object = world_T_camera * c.camera_T_object;
+    r.world_T_object = r.raw_world_T_object;
+    r.score = c.support.fraction;
+    r.matched_edge_fraction = c.matches.matched_fraction;
+    r.reprojection_rms_px = c.rms_px;
+    Eigen::Matrix<double, 6, 6> b = Eigen::Matrix<double, 6, 6>::Zero();
+    b.block<3, 3>(0, 0) = world_T_camera.RotationMatrix();
+    b.block<3, 3>(3, 3) = world_T_camera.RotationMatrix();
+    r.covariance = b * c.fit.covariance_camera * b.transpose();
+    result.objects.push_back(std::move(r));
+  }
+  std::vector<bool> resting(result.objects.size(), false);
+  const Eigen::Vector3d camera_centre = world_T_camera.translation;
+  for (size_t k = 0; k < result.objects.size(); ++k) {
+    Recognition& r = result.objects[k];
+    const Model& model = *std::find_if(models_.models.begin(), models_.models.end(),
+                                       [&](const Model& m) { return m.name == r.model; });
+    auto lowest = [&]() {
+      double z = 1e9;
+      for (const Eigen::Vector3d& v : BoxWorldVertices(model, r.world_T_object)) z = std::min(z, v.z());
+      return z;
+    };
+    if (lowest() - table_top_z > options_.table_snap_distance_m) continue;
+    // Level a nearly flat face (the object cannot rest on the table tilted by a few degrees).
+    const Eigen::Matrix3d rot = r.world_T_object.RotationMatrix();
+    int axis = 0;
+    for (int a = 1; a < 3; ++a) {
+      if (std::abs(rot(2, a)) > std::abs(rot(2, axis))) axis = a;
+    }
+    const Eigen::Vector3d up_axis = rot.col(axis) * (rot(2, axis) >= 0 ? 1.0 : -1.0);
+    const double tilt = std::acos(std::clamp(up_axis.z(), -1.0, 1.0));
+    if (tilt <= options_.table_snap_max_tilt_deg * M_PI / 180) {
+      if (tilt > 1e-9) {
+        const Eigen::Quaterniond level = Eigen::Quaterniond::FromTwoVectors(up_axis, Eigen::Vector3d::UnitZ());
+        r.world_T_object.rotation = (level * r.world_T_object.rotation).normalized();
+        char buf[96];
+        std::snprintf(buf, sizeof(buf), "levelled onto the table: turned %.2f deg", tilt * 180 / M_PI);
+        r.adjustments.push_back(buf);
+      }
+      // Along the camera ray (the monocular system's weak direction, §4.2-4.3).
+      const Eigen::Vector3d ray = (r.world_T_object.translation - camera_centre).normalized();
+      const double dz = table_top_z - lowest();
+      const Eigen::Vector3d move = std::abs(ray.z()) > 0.1 ? Eigen::Vector3d(ray * (dz / ray.z()))
+                                                           : Eigen::Vector3d(0, 0, dz);
+      r.world_T_object.translation += move;
+      resting[k] = true;
+      r.adjustments.push_back("rested on the table: moved " + Mm(move.norm()) +
+                              (std::abs(ray.z()) > 0.1 ? " along the camera ray" : " vertically"));
+    }
+  }
+  // Interpenetrating recognitions: the less certain one moves by the smallest separating move
+  // (horizontal only when it rests on the table); then out of fixed objects.
+  auto model_of = [&](const Recognition& r) -> const Model& {
+    return *std::find_if(models_.models.begin(), models_.models.end(), [&](const Model& m) { return m.name == r.model; });
+  };
+  for (int pass = 0; pass < 3; ++pass) {
+    bool moved = false;
+    for (size_t i = 0; i < result.objects.size(); ++i) {
+      for (size_t j = 0; j < result.objects.size(); ++j) {
+        if (i == j || result.objects[i].score > result.objects[j].score ||
+            (result.objects[i].score == result.objects[j].score && i < j)) {
+          continue;  // i moves when it scores lower
+        }
+        Recognition& ri = result.objects[i];
+        const Recognition& rj = result.objects[j];
+        const Penetration pen = BoxBoxPenetration(model_of(ri).box_size_m, ri.world_T_object, model_of(rj).box_size_m,
+                                                  rj.world_T_object, resting[i]);
+        if (pen.depth_m <= 1e-5) continue;
+        ri.world_T_object.translation += pen.direction * (pen.depth_m + 1e-5);
+        ri.adjustments.push_back("separated from the " + rj.model + " recognized at (" +
+                                 Mm(rj.world_T_object.translation.x()) + ", " + Mm(rj.world_T_object.translation.y()) +
+                                 "): moved " + Mm(pen.depth_m));
+        moved = true;
+      }
+      for (const FixedPart& part : fixed_parts) {
+        Recognition& ri = result.objects[i];
+        const Penetration pen = PartPenetration(model_of(ri), ri.world_T_object, part, resting[i]);
+        if (pen.depth_m <= 1e-5) continue;
+        ri.world_T_object.translation += pen.direction * (pen.depth_m + 1e-5);
+        ri.adjustments.push_back("pushed out of " + part.name + ": moved " + Mm(pen.depth_m));
+        moved = true;
+      }
+    }
+    if (!moved) break;
+  }
+  const auto t5 = Clock::now();
+  result.timing_ms = {{"lines", Ms(t0, t1)},   {"groups", Ms(t1, t2)},         {"index", Ms(t2, t3)},
+                      {"fit_verify", Ms(t3, t4)}, {"select_edit", Ms(t4, t5)}, {"total", Ms(t0, t5)}};
+  return result;
+}
+
+}  // namespace teachsim::vision

@@ -1,0 +1,286 @@
+#include "teachsim/vision/evaluate.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <random>
+
+#include "teachsim/vision/camera.h"
+
+namespace teachsim::vision {
+namespace {
+
+constexpr double kDeg = 3.14159265358979323846 / 180.0;
+
+Eigen::Quaterniond AxisAngle(const Eigen::Vector3d& axis, double angle_rad) {
+  return Eigen::Quaterniond(Eigen::AngleAxisd(angle_rad, axis.normalized()));
+}
+
+std::string DevTruthPath() { return std::string(TEACHSIM_SHARED_DIR) + "/data/vision-dev/truth.json"; }
+
+TEST(BoxSymmetriesTest, GroupOrderFollowsEqualSides) {
+  EXPECT_EQ(BoxSymmetries({0.09, 0.06, 0.03}).size(), 4u);    // slab: three distinct sides
+  EXPECT_EQ(BoxSymmetries({0.09, 0.045, 0.045}).size(), 8u);  // bar: square cross-section
+  EXPECT_EQ(BoxSymmetries({0.06, 0.06, 0.015}).size(), 8u);   // plate
+  EXPECT_EQ(BoxSymmetries({0.045, 0.045, 0.045}).size(), 24u);
+  for (const Eigen::Quaterniond& s : BoxSymmetries({0.045, 0.045, 0.135})) {
+    // Every element maps the box's corners onto corners.
+    const Eigen::Vector3d half(0.0225, 0.0225, 0.0675);
+    const Eigen::Vector3d image = s * half;
+    EXPECT_TRUE(image.cwiseAbs().isApprox(half, 1e-12)) << image.transpose();
+  }
+}
+
+TEST(RotationErrorTest, CubeTurnedByQuarterTurnsIsExact) {
+  const auto cube = BoxSymmetries({0.045, 0.045, 0.045});
+  const Eigen::Quaterniond truth = AxisAngle({0.3, -0.5, 0.8}, 0.7);
+  for (const Eigen::Vector3d& axis : {Eigen::Vector3d(1, 0, 0), Eigen::Vector3d(0, 1, 0), Eigen::Vector3d(0, 0, 1)}) {
+    // Turning the cube about its own axis by 90 deg gives the same cube.
+    EXPECT_NEAR(SymmetricRotationError(truth, truth * AxisAngle(axis, 90 * kDeg), cube), 0.0, 1e-9);
+    // ... and 1 deg more is 1 deg off, whichever axis.
+    EXPECT_NEAR(SymmetricRotationError(truth, truth * AxisAngle(axis, 91 * kDeg), cube), 1 * kDeg, 1e-9);
+  }
+  EXPECT_NEAR(SymmetricRotationError(truth, AxisAngle({1, 1, 0}, 1 * kDeg) * truth, cube), 1 * kDeg, 1e-9);
+  // Without symmetry the quarter turn is a quarter turn.
+  EXPECT_NEAR(SymmetricRotationError(truth, truth * AxisAngle({1, 0, 0}, 90 * kDeg), {Eigen::Quaterniond::Identity()}),
+              90 * kDeg, 1e-9);
+}
+
+TEST(RotationErrorTest, BarAboutItsLongAxisIsEqualOnlyForASquareSection) {
+  const Eigen::Quaterniond truth = AxisAngle({0, 0, 1}, 0.4);
+  const Eigen::Quaterniond turned = truth * AxisAngle({1, 0, 0}, 90 * kDeg);  // x: the long axis
+  EXPECT_NEAR(SymmetricRotationError(truth, turned, BoxSymmetries({0.09, 0.045, 0.045})), 0.0, 1e-9);
+  EXPECT_NEAR(SymmetricRotationError(truth, turned, BoxSymmetries({0.09, 0.06, 0.03})), 90 * kDeg, 1e-9);
+  // Half a turn about any axis is a symmetry of every box.
+  EXPECT_NEAR(SymmetricRotationError(truth, truth * AxisAngle({0, 1, 0}, 180 * kDeg), BoxSymmetries({0.09, 0.06, 0.03})),
+              0.0, 1e-9);
+  // A quarter turn about the long axis leaves a 3-sided box 90 deg away however it is measured.
+  EXPECT_NEAR(SymmetricRotationError(truth, truth * AxisAngle({0, 0, 1}, 90 * kDeg), BoxSymmetries({0.09, 0.06, 0.03})),
+              90 * kDeg, 1e-9);
+}
+
+TEST(RotationErrorTest, SmallErrorsSurviveAnySymmetricRelabelling) {
+  std::mt19937 rng(3);
+  std::normal_distribution<double> n(0, 1);
+  std::uniform_real_distribution<double> angle(0.01, 5.0);
+  for (const Eigen::Vector3d& size :
+       {Eigen::Vector3d(0.09, 0.06, 0.03), Eigen::Vector3d(0.06, 0.06, 0.015), Eigen::Vector3d(0.045, 0.045, 0.045)}) {
+    const auto group = BoxSymmetries(size);
+    for (int i = 0; i < 50; ++i) {
+      const Eigen::Quaterniond truth = AxisAngle({n(rng), n(rng), n(rng)}, 3 * angle(rng) / 5);
+      const Eigen::Quaterniond equal = truth * group[static_cast<std::size_t>(i) % group.size()];
+      const double error = angle(rng) * kDeg;
+      const Eigen::Quaterniond estimate = AxisAngle({n(rng), n(rng), n(rng)}, error) * equal;
+      EXPECT_NEAR(SymmetricRotationError(truth, estimate, group), error, 1e-9);
+    }
+  }
+}
+
+TEST(PositionErrorTest, SplitsAlongTheLineOfSight) {
+  const Eigen::Vector3d camera(0, 0, 1);
+  const Eigen::Vector3d truth(0.3, 0, 0.6);  // sight line (0.6, 0, -0.8)
+  const Eigen::Vector3d sight(0.6, 0, -0.8), across(0, 1, 0), across2(0.8, 0, 0.6);
+  const PositionError e = SplitPositionError(truth, truth + 0.002 * sight + 0.001 * across, camera);
+  EXPECT_NEAR(e.along_m, 0.002, 1e-12);
+  EXPECT_NEAR(e.across_m, 0.001, 1e-12);
+  const PositionError f = SplitPositionError(truth, truth - 0.003 * sight + 0.004 * across2, camera);
+  EXPECT_NEAR(f.along_m, 0.003, 1e-12);
+  EXPECT_NEAR(f.across_m, 0.004, 1e-12);
+}
+
+std::vector<TruthObject> TwoCubesAndASlab() {
+  TruthObject a{"a", "cube45", geometry::Pose3(AxisAngle({0, 0, 1}, 0.3), {0.1, 0, 0.0225}), 1.0, 4000};
+  TruthObject b{"b", "cube45", geometry::Pose3(AxisAngle({0, 0, 1}, 1.1), {-0.1, 0.05, 0.0225}), 0.5, 2000};
+  TruthObject c{"c", "slab", geometry::Pose3(AxisAngle({0, 0, 1}, -0.2), {0, -0.1, 0.015}), 0.2, 800};
+  return {a, b, c};
+}
+
+const std::map<std::string, Eigen::Vector3d> kSizes = {{"cube45", {0.045, 0.045, 0.045}},
+                                                       {"slab", {0.09, 0.06, 0.03}}};
+
+TEST(EvaluateImageTest, MatchesByModelAndPoseAndCountsTheRestAsFalse) {
+  const auto truth = TwoCubesAndASlab();
+  const Eigen::Vector3d camera(0.5, 0, 0.5);
+  std::vector<Detection> detections;
+  // a, found with a symmetric orientation (a quarter turn about z) and a small error.
+  geometry::Pose3 pa = truth[0].world_T_object;
+  pa.rotation = pa.rotation * AxisAngle({0, 0, 1}, 90 * kDeg) * AxisAngle({1, 0, 0}, 0.4 * kDeg);
+  pa.translation += Eigen::Vector3d(0, 0.0005, 0);  // across the view (the camera looks along x-z)
+  detections.push_back({"cube45", pa, 0.9, 0.3});
+  // A duplicate of a with a lower score: false.
+  detections.push_back({"cube45", truth[0].world_T_object, 0.5, 0.2});
+  // b's place but the wrong model: false.
+  detections.push_back({"slab", truth[1].world_T_object, 0.8, 0.2});
+  // b, 30 mm off across the view: false (the limit is 15 mm).
+  geometry::Pose3 far = truth[1].world_T_object;
+  far.translation.y() += 0.03;
+  detections.push_back({"cube45", far, 0.7, 0.2});
+  // c, found.
+  detections.push_back({"slab", truth[2].world_T_object, 0.6, 0.1});
+  auto result = EvaluateImage(truth, detections, kSizes, camera, MatchOptions{});
+  ASSERT_TRUE(result.ok()) << result.status().message();
+  ASSERT_EQ(result->objects.size(), 3u);
+  EXPECT_EQ(result->objects[0].detection, 0);
+  EXPECT_NEAR(result->objects[0].rotation_error_rad, 0.4 * kDeg, 1e-9);
+  EXPECT_NEAR(result->objects[0].position_error.across_m, 0.0005, 1e-9);
+  EXPECT_NEAR(result->objects[0].position_error.along_m, 0.0, 1e-9);
+  EXPECT_EQ(result->objects[1].detection, -1);
+  EXPECT_EQ(result->objects[2].detection, 4);
+  EXPECT_EQ(result->false_positives, 3);
+  EXPECT_EQ(result->detection_truth, (std::vector<int>{0, -1, -1, -1, 2}));
+
+  SummaryBuilder builder;
+  builder.Add(*result, 12.0);
+  builder.Add(*EvaluateImage(truth, {}, kSizes, camera, MatchOptions{}), 4.0);
+  const Summary s = builder.Build();
+  EXPECT_EQ(s.images, 2);
+  EXPECT_DOUBLE_EQ(s.Recall(VisibilityBin::kHigh), 0.5);
+  EXPECT_DOUBLE_EQ(s.Recall(VisibilityBin::kMedium), 0.0);
+  EXPECT_DOUBLE_EQ(s.Recall(VisibilityBin::kLow), 0.5);
+  EXPECT_DOUBLE_EQ(s.FalsePositivesPerImage(), 1.5);
+  EXPECT_EQ(s.within_goals, 2);  // a: 0.4 deg, 0.5 mm across; c: exact
+  EXPECT_EQ(s.rotation_deg.count, 2);
+  EXPECT_NEAR(s.rotation_deg.max, 0.4, 1e-9);
+  EXPECT_DOUBLE_EQ(s.time_ms.median, 8.0);
+  const json::Json j = SummaryToJson(s);
+  EXPECT_EQ(j["recall"]["0.4-0.7"]["objects"], 2);
+  EXPECT_EQ(j["false_positives"], 3);
+}
+
+TEST(EvaluateImageTest, HiddenObjectsAreNotScoredAndUnknownModelsFail) {
+  auto truth = TwoCubesAndASlab();
+  truth[2].visible_fraction = 0.01;
+  const Eigen::Vector3d camera(0.5, 0, 0.5);
+  // Finding the hidden slab is neither a hit nor a false positive.
+  auto result = EvaluateImage(truth, {{"slab", truth[2].world_T_object, 1.0}}, kSizes, camera, MatchOptions{});
+  ASSERT_TRUE(result.ok());
+  EXPECT_EQ(result->objects.size(), 2u);
+  EXPECT_EQ(result->false_positives, 0);
+  EXPECT_EQ(result->detection_truth, std::vector<int>{-2});
+  truth[0].model = "wedge";
+  auto bad = EvaluateImage(truth, {}, kSizes, camera, MatchOptions{});
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("wedge"), std::string::npos);
+  MatchOptions options;
+  options.max_along_m = -1;
+  EXPECT_FALSE(EvaluateImage(TwoCubesAndASlab(), {}, kSizes, camera, options).ok());
+}
+
+TEST(SummarizeTest, NearestRankQuantiles) {
+  const Stats s = Summarize({5, 1, 4, 2, 3, 6, 7, 8, 9, 10, std::nan("")});
+  EXPECT_EQ(s.count, 10);
+  EXPECT_DOUBLE_EQ(s.median, 5.5);
+  EXPECT_DOUBLE_EQ(s.p90, 9);
+  EXPECT_DOUBLE_EQ(s.max, 10);
+  EXPECT_EQ(Summarize({}).count, 0);
+  EXPECT_EQ(BinOf(0.7), VisibilityBin::kHigh);
+  EXPECT_EQ(BinOf(0.69), VisibilityBin::kMedium);
+  EXPECT_EQ(BinOf(0.39), VisibilityBin::kLow);
+}
+
+TEST(TruthSetTest, LoadsTheDevSet) {
+  auto set = LoadTruthSet(DevTruthPath());
+  ASSERT_TRUE(set.ok()) << set.status().message();
+  EXPECT_EQ(set->cases.size(), 12u);
+  EXPECT_EQ(set->model_sizes_m.size(), 5u);
+  EXPECT_TRUE(set->model_sizes_m.at("bar90").isApprox(Eigen::Vector3d(0.09, 0.045, 0.045)));
+  const TruthCase& c = set->cases[0];
+  EXPECT_TRUE(std::filesystem::exists(c.image)) << c.image;
+  EXPECT_EQ(c.camera.width, 640);
+  EXPECT_NEAR(c.camera.k1, -0.2424409387594719, 1e-15);
+  ASSERT_TRUE(c.frame.has_value());
+  EXPECT_DOUBLE_EQ(c.frame->wall_m, 0.02);
+  ASSERT_EQ(c.objects.size(), 6u);
+  EXPECT_EQ(c.objects[4].model, "bar90");
+  EXPECT_NEAR(c.objects[4].visible_fraction, 0.229244016115017, 1e-15);
+  const scene::Scene world = FixedWorldScene(c.frame);
+  ASSERT_EQ(world.objects.size(), 2u);
+  // The frame's walls reach 30 mm above the table, 120 mm either side of its centre along x.
+  const geometry::Aabb bounds = world.objects[1].shape.WorldBounds(geometry::Pose3::Identity());
+  EXPECT_NEAR(bounds.max.z(), 0.03, 1e-12);
+  EXPECT_NEAR(bounds.max.x(), 0.12, 1e-12);
+  EXPECT_NEAR(bounds.max.y(), 0.10, 1e-12);
+}
+
+TEST(TruthSetTest, ErrorsNameTheFieldAndValue) {
+  const std::string path = ::testing::TempDir() + "/evaluate_bad_truth.json";
+  {
+    std::ofstream f(path);
+    f << R"({"models": {"cube45": [0.045, 0.045, 0.045]}, "cases": [{"image": "x.png", "camera": )"
+      << R"({"width": 640, "height": 480, "fx": 700, "fy": 700, "cx": 319.5, "cy": 239.5, "k1": 0, "k2": 0,)"
+      << R"( "p1": 0, "p2": 0, "k3": 0, "position": [0, 0, 1], "quaternion_wxyz": [0, 1, 0, 0]},)"
+      << R"( "objects": [{"name": "a", "model": "cube", "position": [0, 0, 0.0225],)"
+      << R"( "quaternion_wxyz": [1, 0, 0, 0], "visible_fraction": 1, "visible_pixels": 10}]}]})";
+  }
+  auto set = LoadTruthSet(path);
+  ASSERT_FALSE(set.ok());
+  EXPECT_NE(set.status().message().find("cases[0].objects[0].model"), std::string::npos) << set.status().message();
+  EXPECT_NE(set.status().message().find("\"cube\""), std::string::npos);
+  std::filesystem::remove(path);
+}
+
+// The dev set's poses are box centres in the world frame, its cameras world_T_camera with OpenCV's
+// axes and distortion: the outline of every fully visible block, projected through our camera
+// model, lies on strong image edges; 4 px beside it lies on much weaker ones.
+TEST(TruthSetTest, DevSetOutlinesLieOnImageEdges) {
+  auto set = LoadTruthSet(DevTruthPath());
+  ASSERT_TRUE(set.ok()) << set.status().message();
+  int checked = 0;
+  for (const TruthCase& c : set->cases) {
+    const cv::Mat image = cv::imread(c.image, cv::IMREAD_GRAYSCALE);
+    ASSERT_FALSE(image.empty()) << c.image;
+    cv::Mat gx, gy, magnitude;
+    cv::Sobel(image, gx, CV_32F, 1, 0);
+    cv::Sobel(image, gy, CV_32F, 0, 1);
+    cv::magnitude(gx, gy, magnitude);
+    auto camera = Camera::FromSpec(c.camera);
+    ASSERT_TRUE(camera.ok());
+    for (const TruthObject& o : c.objects) {
+      if (o.visible_fraction < 0.999) continue;
+      const Eigen::Vector3d half = set->model_sizes_m.at(o.model) / 2;
+      // Outline: the 3D edges whose projections bound the silhouette (both faces beside the edge,
+      // one facing the camera and one not).
+      const Eigen::Vector3d eye_in_object = o.world_T_object.Inverse() * c.camera.world_T_camera.translation;
+      double on = 0, beside = 0;
+      int samples = 0;
+      for (int axis = 0; axis < 3; ++axis) {
+        const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+        for (int su : {-1, 1}) {
+          for (int sv : {-1, 1}) {
+            const bool face_u = su * eye_in_object[u] > half[u], face_v = sv * eye_in_object[v] > half[v];
+            if (face_u == face_v) continue;  // not on the silhouette
+            for (int k = 1; k < 20; ++k) {
+              Eigen::Vector3d p;
+              p[axis] = half[axis] * (2.0 * k / 20 - 1);
+              p[u] = su * half[u];
+              p[v] = sv * half[v];
+              auto pixel = camera->Project(o.world_T_object * p);
+              auto centre = camera->Project(o.world_T_object.translation);
+              ASSERT_TRUE(pixel && centre);
+              // Outward in the image: away from the projected centre.
+              const Eigen::Vector2d out = (*pixel - *centre).normalized();
+              const Eigen::Vector2d off = *pixel + 4.0 * out;
+              if (!camera->InImage(*pixel) || !camera->InImage(off)) continue;
+              on += magnitude.at<float>(static_cast<int>(std::lround(pixel->y())),
+                                        static_cast<int>(std::lround(pixel->x())));
+              beside += magnitude.at<float>(static_cast<int>(std::lround(off.y())), static_cast<int>(std::lround(off.x())));
+              ++samples;
+            }
+          }
+        }
+      }
+      ASSERT_GT(samples, 40) << c.image << " " << o.name;
+      EXPECT_GT(on, 3.0 * beside) << c.image << " " << o.name << ": mean gradient on the outline " << on / samples
+                                  << ", 4 px outside " << beside / samples;
+      ++checked;
+    }
+  }
+  EXPECT_GE(checked, 20);  // 25 blocks are fully visible in the 12 images
+}
+
+}  // namespace
+}  // namespace teachsim::vision

@@ -1,0 +1,331 @@
+// The recognizer's stages on synthetic cases with known answers (issue 7 "Tests"), and the API's
+// behaviour: models files, options, the index cache, and the model editor on synthetic scenes.
+#include "teachsim/vision/recognizer.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <random>
+
+#include "teachsim/vision/recognition_stages.h"
+
+namespace teachsim::vision {
+namespace {
+
+// A camera 0.6 m from the origin, looking down at 45 degrees; no distortion, so that polygons
+// drawn with OpenCV are exact renders.
+Camera SyntheticCamera() {
+  const Eigen::Vector3d centre(0.35, -0.3, 0.45);
+  const Eigen::Vector3d z = (-centre).normalized();
+  const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d y = z.cross(x);
+  Eigen::Matrix3d world_R_camera;
+  world_R_camera << x, y, z;
+  return Camera({760, 760, 319.5, 239.5}, {}, {Eigen::Quaterniond(world_R_camera), centre}, 640, 480);
+}
+
+// Renders boxes as flat-shaded faces (painter's order, farthest first) on a grey table with a
+// little noise: the grey of a face depends on its normal, as under a distant light. Drawn 4x
+// larger and averaged down (area sampling, exact pixel-centre convention).
+cv::Mat RenderBoxes(const Camera& camera, const std::vector<std::pair<Eigen::Vector3d, geometry::Pose3>>& boxes,
+                    uint32_t seed) {
+  constexpr int kSuper = 4;
+  cv::Mat image(kSuper * camera.height(), kSuper * camera.width(), CV_8U, cv::Scalar(90));
+  std::vector<std::pair<double, size_t>> order;
+  for (size_t i = 0; i < boxes.size(); ++i) {
+    order.push_back({-(camera.camera_T_world() * boxes[i].second.translation).z(), i});
+  }
+  std::sort(order.begin(), order.end());
+  const Eigen::Vector3d light = Eigen::Vector3d(0.3, 0.5, 1).normalized();
+  for (const auto& [depth, i] : order) {
+    const auto& [size, pose] = boxes[i];
+    const Eigen::Vector3d c = (camera.camera_T_world() * pose).Inverse().translation;
+    for (int axis = 0; axis < 3; ++axis) {
+      for (int side = 0; side < 2; ++side) {
+        const double s = side ? 1 : -1;
+        if (s * c[axis] <= 0.5 * size[axis]) continue;  // faces away
+        std::vector<cv::Point> polygon;
+        const int a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+        const int corners[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+        for (const auto& k : corners) {
+          Eigen::Vector3d p;
+          p[axis] = s * 0.5 * size[axis];
+          p[a1] = (k[0] ? 0.5 : -0.5) * size[a1];
+          p[a2] = (k[1] ? 0.5 : -0.5) * size[a2];
+          const Eigen::Vector2d px = *camera.Project(pose * p);
+          // Low-res pixel centre u is at kSuper * (u + 0.5) - 0.5 in the large image; 4 bits of sub-pixel.
+          polygon.emplace_back(static_cast<int>(std::lround((kSuper * (px.x() + 0.5) - 0.5) * 16)),
+                               static_cast<int>(std::lround((kSuper * (px.y() + 0.5) - 0.5) * 16)));
+        }
+        Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+        normal[axis] = s;
+        const double shade = std::max(0.0, light.dot(pose.Rotate(normal)));
+        cv::fillConvexPoly(image, polygon, cv::Scalar(140 + 110 * shade), cv::LINE_8, 4);
+      }
+    }
+  }
+  cv::resize(image, image, cv::Size(camera.width(), camera.height()), 0, 0, cv::INTER_AREA);
+  cv::Mat noise(image.size(), CV_8S);
+  cv::RNG rng(seed);
+  rng.fill(noise, cv::RNG::NORMAL, 0, 2);
+  cv::Mat out;
+  cv::add(image, noise, out, cv::noArray(), CV_8U);
+  return out;
+}
+
+Model Cube() { return {"cube45", Eigen::Vector3d(0.045, 0.045, 0.045)}; }
+Model Bar() { return {"bar90", Eigen::Vector3d(0.09, 0.045, 0.045)}; }
+
+geometry::Pose3 OnTable(const Eigen::Vector3d& size, double x, double y, double yaw_rad) {
+  return {Eigen::Quaterniond(Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ())), {x, y, size.z() / 2}};
+}
+
+TEST(BoxModelTest, AGeneralViewShowsNineEdgesOfThreeFaces) {
+  const Eigen::Vector3d size(0.045, 0.045, 0.045);
+  EXPECT_EQ(__builtin_popcount(VisibleBoxEdges(size, {0.3, -0.2, 0.4})), 9);
+  EXPECT_EQ(__builtin_popcount(OutlineBoxEdges(size, {0.3, -0.2, 0.4})), 6);
+  EXPECT_EQ(__builtin_popcount(VisibleBoxEdges(size, {0, 0, 0.4})), 4);  // straight from above: the top face
+}
+
+TEST(LinesTest, ARenderedCubeGivesItsNineVisibleEdges) {
+  const Camera camera = SyntheticCamera();
+  const Model cube = Cube();
+  const geometry::Pose3 world_T_cube = OnTable(cube.box_size_m, 0.01, 0.02, 0.4);
+  const cv::Mat image = RenderBoxes(camera, {{cube.box_size_m, world_T_cube}}, 1);
+  const std::vector<ImageLine> lines = DetectLines(image, camera, RecognizerOptions());
+  const geometry::Pose3 camera_T_cube = camera.camera_T_world() * world_T_cube;
+  const uint16_t visible = VisibleBoxEdges(cube.box_size_m, camera_T_cube.Inverse().translation);
+  ASSERT_EQ(__builtin_popcount(visible), 9);
+  int found = 0;
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    const Eigen::Vector2d a = *camera.Project(world_T_cube * BoxVertex(cube.box_size_m, kBoxEdges[e][0]));
+    const Eigen::Vector2d b = *camera.Project(world_T_cube * BoxVertex(cube.box_size_m, kBoxEdges[e][1]));
+    const Eigen::Vector2d n = Eigen::Vector2d(-(b - a).y(), (b - a).x()).normalized();
+    for (const ImageLine& l : lines) {
+      // On the edge's line within 0.5 px, covering at least 70 % of it.
+      if (std::abs(n.dot(l.a - a)) > 0.5 || std::abs(n.dot(l.b - a)) > 0.5) continue;
+      if (l.Length() < 0.7 * (b - a).norm()) continue;
+      ++found;
+      break;
+    }
+  }
+  EXPECT_EQ(found, 9);
+  EXPECT_LE(lines.size(), 12u) << "spurious lines on a clean render";
+}
+
+TEST(GroupsTest, IndexVectorsAreInvariantToSimilarityButNotToReflection) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-100, 100), angle(-M_PI, M_PI), scale(0.3, 3);
+  for (GroupKind kind : {GroupKind::kChain3, GroupKind::kChain4, GroupKind::kFork3}) {
+    for (int trial = 0; trial < 50; ++trial) {
+      Group g;
+      g.kind = kind;
+      for (auto& p : g.points) p = {u(rng), u(rng)};
+      const double s = scale(rng), th = angle(rng);
+      const Eigen::Vector2d t(u(rng), u(rng));
+      Group h = g;
+      for (auto& p : h.points) p = s * (Eigen::Rotation2Dd(th) * p) + t;
+      const std::vector<float> vg = IndexVector(g), vh = IndexVector(h);
+      ASSERT_EQ(static_cast<int>(vg.size()), GroupDimension(kind));
+      for (size_t k = 0; k < vg.size(); ++k) EXPECT_NEAR(vg[k], vh[k], 2e-5) << "kind " << static_cast<int>(kind);
+      Group mirrored = g;
+      for (auto& p : mirrored.points) p.x() = -p.x();
+      const std::vector<float> vm = IndexVector(mirrored);
+      double diff = 0;
+      for (size_t k = 0; k < vg.size(); ++k) diff += std::abs(vg[k] - vm[k]);
+      EXPECT_GT(diff, 1e-3);
+    }
+  }
+}
+
+TEST(GroupsTest, FindsChainsAndForksOfACube) {
+  const Camera camera = SyntheticCamera();
+  const Model cube = Cube();
+  const cv::Mat image = RenderBoxes(camera, {{cube.box_size_m, OnTable(cube.box_size_m, 0, 0, 0.3)}}, 2);
+  const std::vector<Group> groups = FindGroups(DetectLines(image, camera, RecognizerOptions()), RecognizerOptions());
+  int count[kGroupKinds] = {0, 0, 0};
+  for (const Group& g : groups) ++count[static_cast<int>(g.kind)];
+  EXPECT_GT(count[static_cast<int>(GroupKind::kChain3)], 5);
+  EXPECT_GT(count[static_cast<int>(GroupKind::kChain4)], 5);
+  EXPECT_GE(count[static_cast<int>(GroupKind::kFork3)], 3);  // the Y in the middle and arrows on the outline
+}
+
+TEST(PoseFitTest, RecoversAPerturbedPoseFromNoiseFreeLines) {
+  const Camera camera = SyntheticCamera();
+  const Model bar = Bar();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int trial = 0; trial < 20; ++trial) {
+    const geometry::Pose3 world_T_bar =
+        geometry::Pose3::FromAxisAngle(Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized(), 3 * u(rng),
+                                       Eigen::Vector3d(0.05 * u(rng), 0.05 * u(rng), 0.05));
+    const geometry::Pose3 truth = camera.camera_T_world() * world_T_bar;
+    const uint16_t visible = VisibleBoxEdges(bar.box_size_m, truth.Inverse().translation);
+    std::vector<LineMatch> matches;
+    for (int e = 0; e < 12; ++e) {
+      if (!(visible >> e & 1)) continue;
+      const Eigen::Vector3d p = truth * BoxVertex(bar.box_size_m, kBoxEdges[e][0]);
+      const Eigen::Vector3d q = truth * BoxVertex(bar.box_size_m, kBoxEdges[e][1]);
+      // Pieces of the edges, as occlusion and texture leave them.
+      const double t0 = 0.1 + 0.2 * std::abs(u(rng)), t1 = 0.9 - 0.2 * std::abs(u(rng));
+      const Eigen::Vector3d a = camera.K() * (p + t0 * (q - p)), b = camera.K() * (p + t1 * (q - p));
+      matches.push_back({e, a.head<2>() / a.z(), b.head<2>() / b.z()});
+    }
+    const geometry::Pose3 start = geometry::Pose3::FromAxisAngle(Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized(),
+                                                                 4 * M_PI / 180, Eigen::Vector3d::Zero()) *
+                                  geometry::Pose3(truth.rotation, truth.translation + 0.006 * Eigen::Vector3d(u(rng), u(rng), u(rng)));
+    const FitResult fit = FitPoseToLines(bar.box_size_m, camera.K(), start, matches, 50, 1.5);
+    EXPECT_LT((fit.camera_T_object.translation - truth.translation).norm(), 1e-6) << "trial " << trial;
+    EXPECT_LT(geometry::RotationAngle(fit.camera_T_object, truth), 1e-6) << "trial " << trial;
+    EXPECT_LT(fit.rms_px, 1e-6);
+  }
+}
+
+TEST(PenetrationTest, SeparatesOverlappingBoxesByTheSmallestMove) {
+  const Eigen::Vector3d size(0.045, 0.045, 0.045);
+  const Penetration p = BoxBoxPenetration(size, geometry::Pose3::Translation({0.04, 0, 0}), size,
+                                          geometry::Pose3::Identity(), false);
+  EXPECT_NEAR(p.depth_m, 0.005, 1e-12);
+  EXPECT_NEAR(p.direction.x(), 1, 1e-12);
+  EXPECT_LE(BoxBoxPenetration(size, geometry::Pose3::Translation({0.05, 0, 0}), size, geometry::Pose3::Identity(),
+                              false).depth_m, 0);
+}
+
+TEST(SymmetryTest, PosesEqualUpToTheBoxSymmetry) {
+  const geometry::Pose3 a = OnTable(Cube().box_size_m, 0, 0, 0.2);
+  const geometry::Pose3 b = OnTable(Cube().box_size_m, 0, 0, 0.2 + M_PI / 2);
+  EXPECT_NEAR(SymmetricRotationAngle(Cube(), a, b), 0, 1e-9);  // a cube turned by 90 deg is the same
+  EXPECT_NEAR(SymmetricRotationAngle(Bar(), a, b), M_PI / 2, 1e-9);  // a bar is not
+  const geometry::Pose3 c = OnTable(Bar().box_size_m, 0, 0, 0.2 + M_PI);
+  EXPECT_NEAR(SymmetricRotationAngle(Bar(), a, c), 0, 1e-9);  // but turned by 180 deg it is
+}
+
+TEST(OptionsTest, ValidateNamesTheField) {
+  EXPECT_TRUE(RecognizerOptions().Validate().ok());
+  RecognizerOptions o;
+  o.min_score = 1.5;
+  const Status s = o.Validate();
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("min_score"), std::string::npos);
+  o = RecognizerOptions();
+  o.view_distances_m.clear();
+  EXPECT_FALSE(o.Validate().ok());
+}
+
+std::string WriteTemp(const std::string& name, const std::string& text) {
+  const std::string path = ::testing::TempDir() + "/" + name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+TEST(LoadModelsTest, ReadsModelListsAndScenes) {
+  auto list = LoadModels(WriteTemp("models_ok.json", R"({"models": [{"name": "cube45", "shape": {"box": [0.045, 0.045, 0.045]}},
+      {"name": "bar90", "shape": {"box": [0.09, 0.045, 0.045]}}]})"));
+  ASSERT_TRUE(list.ok()) << list.status().message();
+  ASSERT_EQ(list->models.size(), 2u);
+  EXPECT_EQ(list->models[1].name, "bar90");
+  EXPECT_DOUBLE_EQ(list->models[1].box_size_m.x(), 0.09);
+  auto scene = LoadModels(std::string(TEACHSIM_SOURCE_DIR) + "/scenes/puzzle.json");
+  ASSERT_TRUE(scene.ok()) << scene.status().message();
+  EXPECT_EQ(scene->models.size(), 5u);  // the five movable blocks; table and frame are fixed
+  EXPECT_EQ(scene->models[0].name, "cube45");  // named by the object's model
+}
+
+TEST(LoadModelsTest, ErrorsNameTheFileAndField) {
+  const std::string path = WriteTemp("models_bad.json", R"({"models": [{"name": "a", "shape": {"box": [0.1, -1, 0.1]}}]})");
+  auto bad = LoadModels(path);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find(path), std::string::npos) << bad.status().message();
+  EXPECT_NE(bad.status().message().find("models[0].shape"), std::string::npos) << bad.status().message();
+  auto twice = LoadModels(WriteTemp("models_twice.json", R"({"models": [{"name": "a", "shape": {"box": [0.1, 0.1, 0.1]}},
+      {"name": "a", "shape": {"box": [0.2, 0.1, 0.1]}}]})"));
+  ASSERT_FALSE(twice.ok());
+  EXPECT_NE(twice.status().message().find("models[1]"), std::string::npos) << twice.status().message();
+}
+
+RecognizerOptions SmallIndexOptions() {
+  RecognizerOptions o;
+  o.view_sphere_samples = 400;
+  return o;
+}
+
+TEST(RecognizerTest, TheIndexCacheIsReusedAndRebuiltWhenModelsChange) {
+  const std::string dir = ::testing::TempDir() + "/teachsim-index-cache-test";
+  std::filesystem::remove_all(dir);
+  ModelLibrary library{{Cube(), Bar()}};
+  auto first = Recognizer::Create(library, SmallIndexOptions(), dir);
+  ASSERT_TRUE(first.ok()) << first.status().message();
+  EXPECT_FALSE(first->loaded_from_cache());
+  EXPECT_GT(first->index_size(), 1000u);
+  auto second = Recognizer::Create(library, SmallIndexOptions(), dir);
+  ASSERT_TRUE(second.ok());
+  EXPECT_TRUE(second->loaded_from_cache());
+  EXPECT_EQ(second->index_size(), first->index_size());
+  // The cached index recognizes as the built one does.
+  const Camera camera = SyntheticCamera();
+  const cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, OnTable(Bar().box_size_m, 0.02, -0.01, 0.7)}}, 4);
+  auto r1 = first->Recognize(image, camera, nullptr);
+  auto r2 = second->Recognize(image, camera, nullptr);
+  ASSERT_TRUE(r1.ok() && r2.ok());
+  ASSERT_EQ(r1->objects.size(), r2->objects.size());
+  for (size_t i = 0; i < r1->objects.size(); ++i) {
+    EXPECT_LT((r1->objects[i].world_T_object.translation - r2->objects[i].world_T_object.translation).norm(), 1e-12);
+  }
+  library.models[1].box_size_m.x() = 0.1;  // the bar got longer
+  auto third = Recognizer::Create(library, SmallIndexOptions(), dir);
+  ASSERT_TRUE(third.ok());
+  EXPECT_FALSE(third->loaded_from_cache());
+  auto fourth = Recognizer::Create(library, SmallIndexOptions(), dir);
+  ASSERT_TRUE(fourth.ok());
+  EXPECT_TRUE(fourth->loaded_from_cache());
+}
+
+TEST(RecognizerTest, RecognizesRenderedBlocksAndRestsThemOnTheTable) {
+  const Camera camera = SyntheticCamera();
+  auto recognizer = Recognizer::Create({{Cube(), Bar()}}, SmallIndexOptions(), "");
+  ASSERT_TRUE(recognizer.ok());
+  const std::vector<std::pair<Model, geometry::Pose3>> truth = {
+      {Cube(), OnTable(Cube().box_size_m, -0.06, 0.03, 0.5)}, {Bar(), OnTable(Bar().box_size_m, 0.05, -0.04, -0.3)}};
+  std::vector<std::pair<Eigen::Vector3d, geometry::Pose3>> boxes;
+  for (const auto& [m, p] : truth) boxes.push_back({m.box_size_m, p});
+  const cv::Mat image = RenderBoxes(camera, boxes, 7);
+  auto result = recognizer->Recognize(image, camera, nullptr);
+  ASSERT_TRUE(result.ok()) << result.status().message();
+  ASSERT_EQ(result->objects.size(), 2u);
+  for (const auto& [model, pose] : truth) {
+    const Recognition* r = nullptr;
+    for (const Recognition& x : result->objects) {
+      if (x.model == model.name) r = &x;
+    }
+    ASSERT_NE(r, nullptr) << model.name;
+    EXPECT_LT((r->raw_world_T_object.translation - pose.translation).norm(), 0.004) << model.name;
+    EXPECT_LT(SymmetricRotationAngle(model, r->raw_world_T_object, pose), 0.5 * M_PI / 180) << model.name;
+    EXPECT_LT(r->reprojection_rms_px, 0.5);
+    // The editor rests it on the table: the lowest corner at z = 0, closer to the truth.
+    double zmin = 1;
+    for (int i = 0; i < 8; ++i) zmin = std::min(zmin, (r->world_T_object * BoxVertex(model.box_size_m, i)).z());
+    EXPECT_NEAR(zmin, 0, 1e-9);
+    EXPECT_LT((r->world_T_object.translation - pose.translation).norm(), 0.002) << model.name;
+    ASSERT_FALSE(r->adjustments.empty());
+    EXPECT_NE(r->adjustments.back().find("rested on the table"), std::string::npos);
+    EXPECT_GT(r->covariance(0, 0), 0);
+  }
+}
+
+TEST(RecognizerTest, RejectsImagesThatDoNotFitTheCamera) {
+  auto recognizer = Recognizer::Create({{Cube()}}, SmallIndexOptions(), "");
+  ASSERT_TRUE(recognizer.ok());
+  const cv::Mat small(100, 100, CV_8U, cv::Scalar(0));
+  EXPECT_FALSE(recognizer->Recognize(small, SyntheticCamera(), nullptr).ok());
+  const cv::Mat blank(480, 640, CV_8U, cv::Scalar(120));
+  auto none = recognizer->Recognize(blank, SyntheticCamera(), nullptr);
+  ASSERT_TRUE(none.ok());
+  EXPECT_TRUE(none->objects.empty());
+}
+
+}  // namespace
+}  // namespace teachsim::vision
