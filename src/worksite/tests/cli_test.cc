@@ -10,34 +10,14 @@
 #include <sstream>
 
 #include "teachsim/vision/calibration.h"
+#include "tests/command_run.h"
 
 namespace teachsim::worksite {
 namespace {
 
-struct CommandRun {
-  int status = -1;
-  std::string out, err;
-};
-
-std::string Slurp(const std::string& path) {
-  std::ifstream f(path);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-CommandRun Teachsim(const std::string& args) {
-  // ctest runs every test as its own process, in parallel: the capture files are per process.
-  const std::string stem = ::testing::TempDir() + "/cli_" + std::to_string(::getpid());
-  const std::string command =
-      std::string(TEACHSIM_BINARY) + " " + args + " > " + stem + "_out.txt 2> " + stem + "_err.txt";
-  const int raw = std::system(command.c_str());
-  CommandRun run;
-  run.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  run.out = Slurp(stem + "_out.txt");
-  run.err = Slurp(stem + "_err.txt");
-  return run;
-}
+using testing::CommandRun;
+using testing::Slurp;
+using testing::Teachsim;
 
 const std::string kScene = std::string(TEACHSIM_SOURCE_DIR) + "/scenes/puzzle.json";
 

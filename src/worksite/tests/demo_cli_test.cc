@@ -13,33 +13,14 @@
 #include <sstream>
 
 #include "teachsim/base/json.h"
+#include "tests/command_run.h"
 
 namespace teachsim::worksite {
 namespace {
 
-struct CommandRun {
-  int status = -1;
-  std::string out, err;
-};
-
-std::string Slurp(const std::string& path) {
-  std::ifstream f(path);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-CommandRun Teachsim(const std::string& args) {
-  const std::string stem = ::testing::TempDir() + "/demo_cli_" + std::to_string(::getpid());
-  const std::string command =
-      std::string(TEACHSIM_BINARY) + " " + args + " > " + stem + "_out.txt 2> " + stem + "_err.txt";
-  const int raw = std::system(command.c_str());
-  CommandRun run;
-  run.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  run.out = Slurp(stem + "_out.txt");
-  run.err = Slurp(stem + "_err.txt");
-  return run;
-}
+using testing::CommandRun;
+using testing::Slurp;
+using testing::Teachsim;
 
 std::string Folder(const std::string& name) {
   const std::string dir = ::testing::TempDir() + "/demo_cli_" + name + "_" + std::to_string(::getpid());
