@@ -3,6 +3,7 @@
 // refusals of malformed or unauthorised input.
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 
@@ -118,8 +119,10 @@ TEST(OperatorService, DragSlidesTheBlockIntoTheCornerAndUndoPutsItBack) {
     max_x = std::max(max_x, p[0].get<double>());
     max_y = std::max(max_y, p[1].get<double>());
   }
-  EXPECT_GT(updates, 60u);  // 1.5 s of dragging at >= 60 steps/s
-  EXPECT_GT(with_seq, 50u);
+  // Rates are checked in Release; the sanitizer build only checks that the stream flows.
+  const bool sanitizer = std::getenv("TEACHSIM_SANITIZER_BUILD") != nullptr;
+  EXPECT_GT(updates, sanitizer ? 10u : 60u);  // 1.5 s of dragging at >= 60 steps/s
+  EXPECT_GT(with_seq, sanitizer ? 5u : 50u);
   const Json cube = (*FindObject(*done, "cube"))["world_T_object"];
   const double x = cube["position"][0], y = cube["position"][1];
   // In the corner: against both walls (half side 22.5 mm, the barrier keeps it > 0.1 mm off).
@@ -131,7 +134,7 @@ TEST(OperatorService, DragSlidesTheBlockIntoTheCornerAndUndoPutsItBack) {
   const double qw = cube["quaternion_wxyz"][0], qz = cube["quaternion_wxyz"][3];
   const double yaw = std::fmod(std::abs(2 * std::atan2(qz, qw)) * 180 / M_PI, 90.0);
   EXPECT_LT(std::min(yaw, 90 - yaw), 1.0) << yaw;
-  EXPECT_GE(done->at("sim_rate_hz").get<double>(), 60.0);
+  EXPECT_GE(done->at("sim_rate_hz").get<double>(), sanitizer ? 1.0 : 60.0);
   EXPECT_FALSE(done->at("paths")["initial"].empty());
   EXPECT_EQ(f.service->snapshot().strokes, 1);
 
