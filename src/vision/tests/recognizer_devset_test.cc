@@ -152,7 +152,7 @@ TEST(DevSetTest, RecognizesTheBlocksOfTheTwelveImages) {
   // Thresholds met on this set (see the report; the goals are higher in places).
   // Recall is far below the goal (98 %) and is the known weakness (see the report);
   // false positives, accuracy and time meet it.
-  EXPECT_GE(bins[0].found, static_cast<int>(0.4 * bins[0].objects));
+  EXPECT_GE(bins[0].found, static_cast<int>(0.55 * bins[0].objects));
   EXPECT_LE(false_positives, 1);
   EXPECT_LT(median(rotation_errors_deg), 0.5);
   EXPECT_LT(max(rotation_errors_deg), 1.0);

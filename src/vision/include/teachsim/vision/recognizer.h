@@ -46,9 +46,11 @@ struct RecognizerOptions {
   double min_segment_length_px = 12;         // shorter segments are dropped, px
   double split_tolerance_px = 0.8;           // Ramer split: largest point-to-chord distance, px
   // --- grouping (item 2)
-  double junction_gap_px = 8;                // endpoints closer than this (relative 0.25 of the shorter segment, whichever larger) are connected, px
+  double junction_gap_px = 12;               // endpoints closer than this (relative 0.25 of the shorter segment, whichever larger) are connected, px
+                                             // (Canny rounds corners off and shadows cut edges short: at 8 px the groups of
+                                             // many fully visible blocks were missing; 12-20 px all did better on the dev set)
   // --- index (item 3)
-  int view_sphere_samples = 600;             // viewing directions per model over the upper hemisphere(s)
+  int view_sphere_samples = 1200;            // viewing directions per model over the whole sphere (a quarter is kept, see BuildIndex)
   std::vector<double> view_distances_m = {0.45, 0.7};  // camera distances used for the model views, m
   int neighbours = 6;                        // k of the approximate k-nearest-neighbour search
   int max_checks = 64;                       // leaves visited by the priority (best-bin-first) search
@@ -63,7 +65,8 @@ struct RecognizerOptions {
   double min_score = 0.7;                    // edge support where the image shows contrast across the predicted edge, 0..1
   double min_coverage = 0.35;                // edge support along all visible predicted edges, 0..1
   double min_edge_contrast = 10;             // grey levels across a predicted edge (5 px apart) for it to count as informative
-  double max_reprojection_rms_px = 2.0;      // matched segments' RMS distance to predicted edges, px
+  double max_reprojection_rms_px = 1.0;      // matched segments' RMS distance to predicted edges, px (above 1 px the
+                                             // dev set's recognitions were the right block but up to 2 deg off)
   double work_area_radius_m = 0.6;           // poses farther than this from the world origin (in x, y) are culled, m
   double below_table_tolerance_m = 0.005;    // poses whose box reaches deeper under z = 0 are culled, m
   double support_tolerance_m = 0.012;        // a recognition must rest on something: its lowest point this close to
