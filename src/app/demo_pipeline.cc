@@ -14,6 +14,7 @@
 #include "teachsim/robot/kinematics.h"
 #include "teachsim/robot/robot_model.h"
 #include "teachsim/sim/demos.h"
+#include "teachsim/vision/evaluate.h"
 #include "teachsim/worksite/mujoco_world.h"
 #include "teachsim/worksite/render.h"
 
@@ -81,31 +82,13 @@ double RestOnSupport(const scene::Scene& fixed_world, double gap_m, scene::Scene
   return lift;
 }
 
-// The proper rotations (object frame) that map a box onto itself: signed permutations that only
-// exchange equal sides (4, 8 or 24).
-std::vector<Eigen::Quaterniond> BoxSymmetries(const Eigen::Vector3d& size_m) {
-  std::vector<Eigen::Quaterniond> out;
-  const int perms[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
-  for (const auto& p : perms) {
-    bool allowed = true;
-    for (int i = 0; i < 3; ++i) allowed = allowed && std::abs(size_m[i] - size_m[p[i]]) < 1e-6;
-    if (!allowed) continue;
-    for (int signs = 0; signs < 8; ++signs) {
-      Eigen::Matrix3d m = Eigen::Matrix3d::Zero();
-      for (int i = 0; i < 3; ++i) m(i, p[i]) = (signs >> i & 1) ? -1.0 : 1.0;
-      if (m.determinant() > 0) out.emplace_back(m);
-    }
-  }
-  return out;
-}
-
 // The operator site's frame for a recognized box (vision may return any of its symmetric
 // equivalents): z as close to up as the box allows, then x nearest the world's x. The planner
 // grasps along the block's own axes, so this keeps the gripper's yaw where the arm can turn it.
 geometry::Pose3 CanonicalBoxPose(const Eigen::Vector3d& size_m, const geometry::Pose3& pose) {
   geometry::Pose3 best = pose;
   double best_score = -1e300;
-  for (const Eigen::Quaterniond& s : BoxSymmetries(size_m)) {
+  for (const Eigen::Quaterniond& s : vision::BoxSymmetries(size_m)) {
     const Eigen::Quaterniond q = (pose.rotation * s).normalized();
     const Eigen::Vector3d z = q * Eigen::Vector3d::UnitZ(), x = q * Eigen::Vector3d::UnitX();
     const double score = 10.0 * z.z() + x.x();
@@ -155,23 +138,7 @@ bool DemoResult::success() const {
 }
 
 double BoxRotationError(const Eigen::Vector3d& size_m, const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) {
-  // The proper signed permutations that only exchange equal sides (4, 8 or 24 of them).
-  const Eigen::Quaterniond delta = a.conjugate() * b;
-  double best = 4.0;
-  const int perms[6][3] = {{0, 1, 2}, {1, 2, 0}, {2, 0, 1}, {0, 2, 1}, {2, 1, 0}, {1, 0, 2}};
-  for (const auto& p : perms) {
-    bool allowed = true;
-    for (int i = 0; i < 3; ++i) allowed = allowed && std::abs(size_m[i] - size_m[p[i]]) < 1e-6;
-    if (!allowed) continue;
-    for (int signs = 0; signs < 8; ++signs) {
-      Eigen::Matrix3d s = Eigen::Matrix3d::Zero();
-      for (int i = 0; i < 3; ++i) s(i, p[i]) = (signs >> i & 1) ? -1.0 : 1.0;
-      if (s.determinant() < 0) continue;
-      const Eigen::Quaterniond q(delta * Eigen::Quaterniond(s));
-      best = std::min(best, 2.0 * std::acos(std::min(1.0, std::abs(q.normalized().w()))));
-    }
-  }
-  return best;
+  return vision::SymmetricRotationError(a, b, vision::BoxSymmetries(size_m));
 }
 
 scene::Scene PerturbWorld(const scene::Scene& scene, const DemoOptions& options, const robot::RobotModel* model) {

@@ -16,6 +16,7 @@
 #include <sstream>
 
 #include "teachsim/base/json.h"
+#include "teachsim/vision/evaluate.h"
 #include "teachsim/vision/recognition_stages.h"
 
 namespace teachsim::vision {
@@ -149,37 +150,8 @@ uint64_t HashModelLibrary(const ModelLibrary& models) {
 
 // ---------------------------------------------------------------- symmetry
 
-namespace {
-
-// The rotations that map a box of this size onto itself: signed permutations with det +1 that
-// only exchange axes of equal length.
-std::vector<Eigen::Matrix3d> BoxSymmetries(const Eigen::Vector3d& size) {
-  std::vector<Eigen::Matrix3d> out;
-  int perm[3] = {0, 1, 2};
-  do {
-    for (int signs = 0; signs < 8; ++signs) {
-      Eigen::Matrix3d s = Eigen::Matrix3d::Zero();
-      bool ok = true;
-      for (int i = 0; i < 3; ++i) {
-        s(i, perm[i]) = (signs >> i & 1) ? -1 : 1;
-        if (std::abs(size[i] - size[perm[i]]) > 1e-6 * size.maxCoeff()) ok = false;
-      }
-      if (ok && s.determinant() > 0) out.push_back(s);
-    }
-  } while (std::next_permutation(perm, perm + 3));
-  return out;
-}
-
-}  // namespace
-
 double SymmetricRotationAngle(const Model& model, const geometry::Pose3& a, const geometry::Pose3& b) {
-  const Eigen::Matrix3d ra = a.RotationMatrix(), rb = b.RotationMatrix();
-  double best = M_PI;
-  for (const Eigen::Matrix3d& s : BoxSymmetries(model.box_size_m)) {
-    const Eigen::Quaterniond d((ra * s).transpose() * rb);
-    best = std::min(best, 2 * std::atan2(d.vec().norm(), std::abs(d.w())));  // precise near 0, unlike acos
-  }
-  return best;
+  return SymmetricRotationError(b.rotation, a.rotation, BoxSymmetries(model.box_size_m, 1e-6 * model.box_size_m.maxCoeff()));
 }
 
 // ---------------------------------------------------------------- the index (item 3)
