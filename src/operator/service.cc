@@ -770,6 +770,8 @@ struct OperatorService::Impl {
       case MessageType::kResetWorld:
         Command(session, "reset", m.seq);
         return;
+      case MessageType::kHello:  // the server has checked the protocol; nothing to answer
+        return;
       case MessageType::kResume:
         Command(session, "resume", m.seq);
         return;

@@ -199,6 +199,8 @@ struct WorksiteService::Impl : net::ServerHandler {
       case net::MessageType::kResetWorld:
         Queue(ResetWorld{});
         return;
+      case net::MessageType::kHello:  // the server has checked the protocol; nothing to answer
+        return;
       case net::MessageType::kResume:
         if (latched) {
           latched = false;

@@ -79,6 +79,9 @@ TEST(OperatorService, BrowserGetsTheWholeWorldStateOnConnect) {
   // help answers without the lease; a state-changing command needs it.
   Json help = b.Command("help");
   EXPECT_TRUE(help["ok"].get<bool>());
+  // The client's hello, sent before everything else, was taken silently (the server has checked
+  // its protocol): no error came back on this ordered link before help's answer.
+  EXPECT_EQ(b.Count(MessageType::kError), 0u) << (b.Last(MessageType::kError) ? b.Last(MessageType::kError)->dump() : "");
   EXPECT_NE(help["text"].get<std::string>().find("capture NAME"), std::string::npos);
   Json refused = b.Command("select cube");
   EXPECT_FALSE(refused["ok"].get<bool>());
