@@ -103,10 +103,14 @@ TEST(WorksiteService, ConnectGivesSceneLinkAndRobotStateAndBadInputIsAnswered) {
   EXPECT_TRUE(p.Wait(MessageType::kError, [](const Json& j) { return j["code"] == "malformed_json"; }).has_value());
   ASSERT_TRUE(p.client->SendRaw(std::string(1100000, 'a'), false).ok());
   EXPECT_TRUE(p.Wait(MessageType::kError, [](const Json& j) { return j["code"] == "too_large"; }).has_value());
-  ASSERT_TRUE(p.client->SendRaw("{\"type\": \"launch\", \"seq\": 99}", false).ok());
-  EXPECT_TRUE(p.Wait(MessageType::kError, [](const Json& j) { return j["code"] == "unknown_type"; }).has_value());
   ASSERT_TRUE(p.client->Send(MessageType::kConsoleCommand, {{"line", "help"}}).ok());
   EXPECT_TRUE(p.Wait(MessageType::kError, [](const Json& j) { return j["code"] == "unexpected"; }).has_value());
+  // Only verified programs cross the link: a malformed one is refused, nothing moves.
+  ASSERT_TRUE(p.client->Send(MessageType::kProgramSubmit, {{"program_id", "bad"}, {"program", {{"commands", "many"}}}}).ok());
+  EXPECT_TRUE(p.Wait(MessageType::kError, [](const Json& j) { return j["code"] == "invalid_program"; }).has_value());
+  // Last: a raw message's seq (99) moves the server's expected seq past the client's own.
+  ASSERT_TRUE(p.client->SendRaw("{\"type\": \"launch\", \"seq\": 99}", false).ok());
+  EXPECT_TRUE(p.Wait(MessageType::kError, [](const Json& j) { return j["code"] == "unknown_type"; }).has_value());
   EXPECT_TRUE(p.client->connected());
   EXPECT_EQ(site->stats().programs_started, 0);
 }
