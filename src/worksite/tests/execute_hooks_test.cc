@@ -11,23 +11,15 @@
 #include "teachsim/vision/camera.h"
 #include "teachsim/worksite/execute.h"
 #include "teachsim/worksite/render.h"
+#include "tests/fixtures.h"
 
 namespace teachsim::worksite {
 namespace {
 
 using Eigen::Vector3d;
 
-scene::Scene Puzzle() {
-  auto scene = scene::LoadScene(std::string(TEACHSIM_SOURCE_DIR) + "/scenes/puzzle.json");
-  TEACHSIM_CHECK(scene.ok());
-  return *scene;
-}
-
-robot::RobotModel Arm() {
-  auto model = robot::LoadRobotModel(std::string(TEACHSIM_SOURCE_DIR) + "/robots/crs_a465.json");
-  TEACHSIM_CHECK(model.ok());
-  return *model;
-}
+using testing::Arm;
+using testing::Puzzle;
 
 // Grasp the cube from above (jaws along its y axis, fingertips 12 mm below its top), lift it and
 // carry it 12 cm across the table at 0.1 m/s.

@@ -10,23 +10,15 @@
 
 #include "teachsim/robot/controller.h"
 #include "teachsim/robot/kinematics.h"
+#include "tests/fixtures.h"
 
 namespace teachsim::worksite {
 namespace {
 
 using Eigen::Vector3d;
 
-scene::Scene Puzzle() {
-  auto scene = scene::LoadScene(std::string(TEACHSIM_SOURCE_DIR) + "/scenes/puzzle.json");
-  TEACHSIM_CHECK(scene.ok());
-  return *scene;
-}
-
-robot::RobotModel Arm() {
-  auto model = robot::LoadRobotModel(std::string(TEACHSIM_SOURCE_DIR) + "/robots/crs_a465.json");
-  TEACHSIM_CHECK(model.ok());
-  return *model;
-}
+using testing::Arm;
+using testing::Puzzle;
 
 TEST(MujocoWorld, BlocksRestOnTheTableWithoutSinkingOrJitter) {
   const scene::Scene scene = Puzzle();
