@@ -248,29 +248,29 @@ cv::Mat DrawBarChart(const BarChart& chart, int width_px, int height_px) {
   return image;
 }
 
-cv::Mat HConcat(const std::vector<cv::Mat>& images) {
-  int width = 0, height = 0;
-  for (const cv::Mat& m : images) width += m.cols, height = std::max(height, m.rows);
-  cv::Mat out(height, width, CV_8UC3, kWhite);
-  int x = 0;
+namespace {
+
+// Side by side (horizontal) or stacked, on a white background as large as the largest image.
+cv::Mat Concat(const std::vector<cv::Mat>& images, bool horizontal) {
+  int along = 0, across = 0;
   for (const cv::Mat& m : images) {
-    m.copyTo(out(cv::Rect(x, 0, m.cols, m.rows)));
-    x += m.cols;
+    along += horizontal ? m.cols : m.rows;
+    across = std::max(across, horizontal ? m.rows : m.cols);
+  }
+  cv::Mat out = horizontal ? cv::Mat(across, along, CV_8UC3, kWhite) : cv::Mat(along, across, CV_8UC3, kWhite);
+  int at = 0;
+  for (const cv::Mat& m : images) {
+    m.copyTo(out(horizontal ? cv::Rect(at, 0, m.cols, m.rows) : cv::Rect(0, at, m.cols, m.rows)));
+    at += horizontal ? m.cols : m.rows;
   }
   return out;
 }
 
-cv::Mat VConcat(const std::vector<cv::Mat>& images) {
-  int width = 0, height = 0;
-  for (const cv::Mat& m : images) height += m.rows, width = std::max(width, m.cols);
-  cv::Mat out(height, width, CV_8UC3, kWhite);
-  int y = 0;
-  for (const cv::Mat& m : images) {
-    m.copyTo(out(cv::Rect(0, y, m.cols, m.rows)));
-    y += m.rows;
-  }
-  return out;
-}
+}  // namespace
+
+cv::Mat HConcat(const std::vector<cv::Mat>& images) { return Concat(images, true); }
+
+cv::Mat VConcat(const std::vector<cv::Mat>& images) { return Concat(images, false); }
 
 vision::Camera LookAtCamera(const Eigen::Vector3d& eye, const Eigen::Vector3d& target, int width_px, int height_px,
                             double focal_px) {
