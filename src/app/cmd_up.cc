@@ -40,6 +40,7 @@ struct SiteArgs {
   std::uint64_t seed = 1;
   double time_scale = 1.0;
   double link_timeout_s = 0.25;
+  double browser_link_timeout_s = op::OperatorOptions{}.browser_link_timeout_s;
   std::string camera;
   bool no_recognition = false;
 };
@@ -157,6 +158,8 @@ op::OperatorOptions OperatorOptionsFrom(const SiteArgs& a, const std::string& wo
   o.worksite = worksite;
   o.token = token;
   o.link_timeout_s = a.link_timeout_s;
+  o.browser_link_timeout_s = a.browser_link_timeout_s;
+  o.robots_dir = DataPath("robots");
   return o;
 }
 
@@ -244,7 +247,8 @@ int RunUp(SiteArgs a) {
 
 void AddCommonOptions(CLI::App* sub, SiteArgs* a) {
   sub->add_option("--port-file", a->port_file, "write the listening port to this file (for scripts and tests)");
-  sub->add_option("--link-timeout", a->link_timeout_s, "seconds of silence after which a link counts as lost")
+  sub->add_option("--link-timeout", a->link_timeout_s,
+                  "seconds of silence after which the work-site link counts as lost (the robot stops)")
       ->capture_default_str();
 }
 
@@ -263,6 +267,10 @@ void AddOperatorOptions(CLI::App* sub, SiteArgs* a) {
   sub->add_option("--http-port", a->http_port, "browser port on 127.0.0.1 (0: a free one)")->capture_default_str();
   sub->add_option("--web-root", a->web_root, "folder of the browser UI (default: $TEACHSIM_HOME/web or the source tree's web/)");
   sub->add_option("--sessions", a->sessions, "folder of saved sessions")->capture_default_str();
+  sub->add_option("--browser-link-timeout", a->browser_link_timeout_s,
+                  "seconds of silence after which a browser counts as lost (its drag ends); browsers throttle "
+                  "background tabs, so this is longer than --link-timeout")
+      ->capture_default_str();
 }
 
 }  // namespace

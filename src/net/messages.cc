@@ -177,20 +177,22 @@ void ValidateProgramSubmit(const Reader& r) {
 }
 
 void ValidateExecutionProgress(const Reader& r) {
-  TS_KEYS("program_id", "command_index", "command_count", "state", "message");
+  TS_KEYS("program_id", "command_index", "command_count", "state", "message", "replay");
   ReadName(r.At("program_id"));
   long long count = r.At("command_count").IntegerInRange(0, 1000000);
   r.At("command_index").IntegerInRange(0, count);
   ReadOneOf(r.At("state"), {"running", "done", "failed", "stopped"});
   if (auto s = r.Find("message")) ReadText(*s);
+  if (auto s = r.Find("replay")) s->Bool();  // resent on (re)connect: state, not news
 }
 
 void ValidateReport(const Reader& r) {
-  TS_KEYS("program_id", "ok", "report");
+  TS_KEYS("program_id", "ok", "report", "replay");
   ReadName(r.At("program_id"));
   r.At("ok").Bool();
   Reader report = r.At("report");
   if (!report.IsObject()) report.Fail("must be an object");
+  if (auto s = r.Find("replay")) s->Bool();  // resent on (re)connect: state, not news
 }
 
 void ValidateDraggerInput(const Reader& r) {

@@ -18,6 +18,7 @@
 #include "teachsim/net/server.h"
 #include "teachsim/operator/session.h"
 #include "teachsim/robot/program.h"
+#include "teachsim/robot/robot_model.h"
 #include "teachsim/sim/path.h"
 
 namespace teachsim::op {
@@ -31,6 +32,10 @@ Status OperatorOptions::Validate() const {
   if (sessions_dir.empty()) return Status::InvalidInput("operator: sessions_dir must not be empty");
   if (!(heartbeat_period_s > 0)) return Status::InvalidInput("operator: heartbeat_period_s must be > 0");
   if (!(link_timeout_s > 0)) return Status::InvalidInput("operator: link_timeout_s must be > 0");
+  if (!(browser_link_timeout_s > heartbeat_period_s && browser_link_timeout_s <= 60)) {
+    return Status::InvalidInput("operator: browser_link_timeout_s must be in (heartbeat_period_s, 60], got " +
+                                json::FormatNumber(browser_link_timeout_s));
+  }
   if (!(reconnect_period_s > 0)) return Status::InvalidInput("operator: reconnect_period_s must be > 0");
   if (!(sim_rate_hz >= 60 && sim_rate_hz <= 10000)) {
     return Status::InvalidInput("operator: sim_rate_hz must be in [60, 10000], got " + json::FormatNumber(sim_rate_hz));
@@ -196,6 +201,7 @@ struct OperatorService::Impl {
   bool site_reconnect_due = false;
   bool reconnecting = false;
   Json last_recognitions;  // as received (frame_seq of the work site)
+  Json last_progress;      // the last execution_progress (without "replay"), null before one
   std::optional<net::BinaryFrame> last_frame;
   std::map<net::SessionId, std::deque<std::pair<std::uint64_t, std::uint64_t>>> frame_seqs;  // site seq -> ours
   WallClock::time_point last_robot_state_relay{};
@@ -230,6 +236,25 @@ struct OperatorService::Impl {
     snap.sim_rate_hz = sim_rate_hz;
   }
 
+  // The placed robot's table from options.robots_dir (loaded once per model name), or null.
+  mutable std::optional<robot::RobotModel> robot_table;
+  mutable std::string robot_table_tried;
+  const robot::RobotModel* RobotTable() const {
+    if (!model.robot || options.robots_dir.empty()) return nullptr;
+    if (robot_table_tried != model.robot->model) {
+      robot_table_tried = model.robot->model;
+      const std::string file = (std::filesystem::path(options.robots_dir) / (model.robot->model + ".json")).string();
+      auto loaded = robot::LoadRobotModel(file);
+      robot_table.reset();
+      if (loaded.ok()) {
+        robot_table = std::move(loaded).value();
+      } else {
+        std::fprintf(stderr, "operator: no whole-arm view: %s\n", loaded.status().message().c_str());
+      }
+    }
+    return robot_table ? &*robot_table : nullptr;
+  }
+
   std::string ObjectOrigin(const std::string& name) const {
     return std::find(recognized.begin(), recognized.end(), name) != recognized.end() ? "recognized" : "scene";
   }
@@ -260,7 +285,10 @@ struct OperatorService::Impl {
     Json cameras = Json::array();
     for (const auto& c : model.cameras) cameras.push_back(scene::WriteCamera(c));
     Json robot = nullptr;
-    if (model.robot) robot = {{"model", model.robot->model}, {"base", geometry::WritePose(model.robot->world_T_base)}};
+    if (model.robot) {
+      robot = {{"model", model.robot->model}, {"base", geometry::WritePose(model.robot->world_T_base)}};
+      if (const robot::RobotModel* table = RobotTable()) robot["kinematics"] = robot::RobotModelToJson(*table);
+    }
     std::vector<sim::PathNode> demo;
     if (initial_path) {
       demo = initial_path->nodes;
@@ -572,6 +600,43 @@ struct OperatorService::Impl {
     return {text + "the model is back at the work site's scene"};
   }
 
+  // The model editor (paper §4.3): the operator adds recognition INDEX to the model. Its rules:
+  //  * an object whose lowest point is within kRestSnap_m of a fixed object's top (the table, the
+  //    frame) rests on it: it is moved along z to kRestClearance_m above it (the monocular pose is
+  //    least sure along the camera axis; the scene files keep the same clearance);
+  //  * a recognition overlapping a movable model object of the same model is that object seen
+  //    again: its pose is corrected (no duplicate);
+  //  * nothing may interpenetrate: a pose that intersects another object is refused.
+  static constexpr double kRestSnap_m = 0.01;
+  static constexpr double kRestClearance_m = 0.25e-3;
+
+  static bool Overlap(const geometry::Aabb& a, const geometry::Aabb& b) {
+    return (a.min.array() < b.max.array()).all() && (b.min.array() < a.max.array()).all();
+  }
+
+  // Rests `object` on the highest fixed support under it whose top is within kRestSnap_m of its
+  // lowest point; returns the support's name, or "" when it rests on nothing.
+  std::string RestOnSupport(scene::SceneObject& object) const {
+    const geometry::Aabb box = object.shape.WorldBounds(object.world_T_object);
+    const scene::SceneObject* best = nullptr;
+    double best_top = -1e300;
+    for (const auto& o : model.objects) {
+      if (!o.fixed) continue;
+      for (const geometry::ShapePart& part : o.shape.parts()) {
+        const geometry::Aabb b = part.convex->WorldBounds(o.world_T_object * part.shape_T_part);
+        const bool under = b.min.x() < box.max.x() && box.min.x() < b.max.x() && b.min.y() < box.max.y() &&
+                           box.min.y() < b.max.y();
+        if (under && std::abs(box.min.z() - b.max.z()) <= kRestSnap_m && b.max.z() > best_top) {
+          best = &o;
+          best_top = b.max.z();
+        }
+      }
+    }
+    if (best == nullptr) return "";
+    object.world_T_object.translation.z() += best_top + kRestClearance_m - box.min.z();
+    return best->name;
+  }
+
   Reply CmdAdd(const std::vector<std::string>& w) {
     if (w.size() != 2) return Fail("usage: add INDEX (see list)");
     if (!last_recognitions.is_object() || last_recognitions["objects"].empty()) return Fail("add: no recognitions yet");
@@ -605,13 +670,53 @@ struct OperatorService::Impl {
     object.shape = std::move(built).value();
     object.fixed = false;
     object.model = model_name;
-    for (int n = 1;; ++n) {
-      object.name = model_name + "_" + std::to_string(n);
-      if (model.FindObject(object.name) < 0) break;
+    const std::string support = RestOnSupport(object);
+    // The same object seen again: a movable model object of this model that the recognition overlaps.
+    const geometry::Aabb box = object.shape.WorldBounds(object.world_T_object);
+    int same = -1;
+    for (std::size_t i = 0; i < model.objects.size(); ++i) {
+      const scene::SceneObject& o = model.objects[i];
+      if (!o.fixed && o.model == model_name && Overlap(box, o.shape.WorldBounds(o.world_T_object))) {
+        same = static_cast<int>(i);
+        break;
+      }
+    }
+    scene::Scene trial = model;
+    if (same >= 0) {
+      object.name = model.objects[static_cast<std::size_t>(same)].name;
+      trial.objects[static_cast<std::size_t>(same)].world_T_object = object.world_T_object;
+    } else {
+      for (int n = 1;; ++n) {
+        object.name = model_name + "_" + std::to_string(n);
+        if (model.FindObject(object.name) < 0) break;
+      }
+      trial.objects.push_back(object);
+    }
+    // No interpenetration: the simulator must be able to start a drag of it where it is.
+    auto world = sim::SimWorld::Build(std::move(trial), options.sim);
+    if (!world.ok()) return Fail("add: " + world.status().message());
+    if (auto state = sim::StartDrag(*world, object.name); !state.ok()) {
+      return Fail("add: " + model_name + " at " + Mm(object.world_T_object.translation) + " is refused: " +
+                  state.status().message() + " (delete that object first, or wait for a better recognition)");
+    }
+    const std::string rests = support.empty() ? "" : ", resting on " + support;
+    if (std::find(recognized.begin(), recognized.end(), object.name) == recognized.end()) {
+      recognized.push_back(object.name);
+    }
+    if (same >= 0) {
+      scene::SceneObject& o = model.objects[static_cast<std::size_t>(same)];
+      const double moved_mm = (o.world_T_object.translation - object.world_T_object.translation).norm() * 1e3;
+      o.world_T_object = object.world_T_object;
+      // The demonstration started from the old pose of the scene.
+      if (!strokes.empty() || program) ClearDemonstration();
+      char text[64];
+      std::snprintf(text, sizeof text, " (moved %.1f mm)", moved_mm);
+      return {"updated " + object.name + " from recognition " + w[1] + ": at " + Mm(object.world_T_object.translation) +
+              text + rests};
     }
     model.objects.push_back(object);
-    recognized.push_back(object.name);
-    return {"added " + object.name + " at " + Mm(object.world_T_object.translation)};
+    if (!strokes.empty() || program) ClearDemonstration();
+    return {"added " + object.name + " at " + Mm(object.world_T_object.translation) + rests};
   }
 
   Reply CmdDelete(const std::vector<std::string>& w) {
@@ -744,6 +849,7 @@ struct OperatorService::Impl {
     (void)server->Send(session, MessageType::kLinkState, SiteLinkStateMessage());
     if (last_frame) SendFrameTo(session, *last_frame);
     if (last_recognitions.is_object()) SendRecognitionsTo(session, last_recognitions);
+    if (last_progress.is_object()) (void)server->Send(session, MessageType::kExecutionProgress, ReplayOf(last_progress));
   }
 
   void BrowserGone(net::SessionId session) {
@@ -1016,6 +1122,11 @@ struct OperatorService::Impl {
     for (net::SessionId s : server->Sessions()) SendFrameTo(s, frame);
   }
 
+  static Json ReplayOf(Json fields) {
+    fields["replay"] = true;
+    return fields;
+  }
+
   static Json Fields(const net::Message& m) {
     Json f = m.body;
     f.erase("type");
@@ -1066,22 +1177,46 @@ struct OperatorService::Impl {
         for (net::SessionId s : server->Sessions()) SendRecognitionsTo(s, last_recognitions);
         return;
       case MessageType::kExecutionProgress: {
+        // A replay (sent on every (re)connection) is the state as it is: taken silently when it is
+        // what we have, announced once when it is news (it changed while the link was down).
         Json f = Fields(m);
-        server->Broadcast(MessageType::kExecutionProgress, f);
+        const bool replay = f.value("replay", false);
+        f.erase("replay");
+        if (replay && last_progress == f) return;
+        last_progress = f;
         const std::string state = f["state"].get<std::string>();
+        bool changed = false;
+        if (replay && state == "running" && busy.empty()) {
+          busy = "executing";  // still running at the work site
+          changed = true;
+        }
+        if (replay && state != "running" && busy == "executing") {
+          busy.clear();
+          changed = true;
+        }
+        server->Broadcast(MessageType::kExecutionProgress, replay ? ReplayOf(f) : f);
         std::string line = "execution " + f["program_id"].get<std::string>() + ": " + state + ", command " +
                            std::to_string(f["command_index"].get<long long>()) + "/" +
                            std::to_string(f["command_count"].get<long long>());
         if (f.contains("message")) line += " " + f["message"].get<std::string>();
+        if (replay) line += " (learnt on reconnecting to the work site)";
         ConsoleAll(line, state != "failed" && state != "stopped");
+        if (changed) Changed();
         return;
       }
       case MessageType::kReport: {
         Json f = Fields(m);
-        server->Broadcast(MessageType::kReport, f);
-        report = SessionReport{f["program_id"].get<std::string>(), f["ok"].get<bool>(), f["report"]};
+        const bool replay = f.value("replay", false);
+        f.erase("replay");
+        const std::string id = f["program_id"].get<std::string>();
+        const bool ok = f["ok"].get<bool>();
+        if (replay && report && report->program_id == id && report->ok == ok && report->report == f["report"]) return;
+        server->Broadcast(MessageType::kReport, replay ? ReplayOf(f) : f);
+        report = SessionReport{id, ok, f["report"]};
         if (busy == "executing") busy.clear();
-        ConsoleAll("report " + report->program_id + ": " + ReportSummary(*report), report->ok);
+        ConsoleAll("report " + report->program_id + ": " + ReportSummary(*report) +
+                       (replay ? " (learnt on reconnecting to the work site)" : ""),
+                   report->ok);
         Changed();
         return;
       }
@@ -1148,7 +1283,8 @@ Status OperatorService::Start() {
   so.name = "teachsim-operator";
   so.static_root = m.options.web_root;
   so.heartbeat_period_s = m.options.heartbeat_period_s;
-  so.link_timeout_s = m.options.link_timeout_s;
+  so.link_timeout_s = m.options.browser_link_timeout_s;
+  so.close_after_silence_s = std::max(so.close_after_silence_s, 2 * m.options.browser_link_timeout_s);
   m.server = std::make_unique<net::Server>(m.loop, *m.clock, so, m.browser_side);
   if (Status s = m.server->Start(); !s.ok()) {
     m.server.reset();

@@ -158,8 +158,14 @@ struct WorksiteService::Impl : net::ServerHandler {
     (void)s.Send(session, net::MessageType::kWorksiteScene, SceneMessage());
     (void)s.Send(session, net::MessageType::kLinkState, last_link_state);
     if (last_robot_state) (void)s.Send(session, net::MessageType::kRobotState, *last_robot_state);
-    if (last_progress) (void)s.Send(session, net::MessageType::kExecutionProgress, *last_progress);
-    if (last_report) (void)s.Send(session, net::MessageType::kReport, *last_report);
+    // The last execution's progress and report describe the state; marked as replays so that a
+    // receiver that has seen them does not take them for new events (docs/protocol.md).
+    auto replay = [](Json fields) {
+      fields["replay"] = true;
+      return fields;
+    };
+    if (last_progress) (void)s.Send(session, net::MessageType::kExecutionProgress, replay(*last_progress));
+    if (last_report) (void)s.Send(session, net::MessageType::kReport, replay(*last_report));
   }
 
   void Refuse(net::Server& s, net::SessionId session, const net::Message& m, const std::string& code,

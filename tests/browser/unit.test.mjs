@@ -119,3 +119,43 @@ test('dragger: a ray meets the face plane, and the dragger moves in that plane o
   const far = drag.update([0, 0, 0.0500001], [1, 0, -1e-6]);
   assert.ok(far === null || Math.hypot(far[0], far[1]) <= 0.5 + 1e-9);
 });
+
+// ---- the whole arm (web/js/kinematics.js): the robot table's modified DH, as src/robot ----------
+
+import { armFrames, armSegments, checkKinematics, toPose } from '../../web/js/kinematics.js';
+
+const crs = JSON.parse(readFileSync(path.join(root, 'robots/crs_a465.json'), 'utf8'));
+const atOrigin = { position: [0, 0, 0], quaternion_wxyz: [1, 0, 0, 0] };
+
+test('arm: at q = 0 the upper arm is vertical and the forearm and tool point along base x (robots/crs_a465.json)', () => {
+  const f = armFrames(checkKinematics(crs), atOrigin, [0, 0, 0, 0, 0, 0]);
+  assert.equal(f.length, 8);   // base, six link frames, tool
+  const close = (a, b) => a.every((v, i) => Math.abs(v - b[i]) < 1e-9);
+  assert.ok(close(f[1].p, [0, 0, 0.33]), `shoulder ${f[1].p}`);        // d1
+  assert.ok(close(f[3].p, [0, 0, 0.635]), `elbow ${f[3].p}`);          // + a2 up
+  assert.ok(close(f[6].p, [0.406, 0, 0.635]), `flange ${f[6].p}`);     // + d4 + d6 along x
+  assert.ok(close(f[7].p, [0.536, 0, 0.635]), `tool ${f[7].p}`);       // + 130 mm of gripper
+  // drawn links: base-shoulder, upper arm, forearm, wrist-flange, flange-tool (zero lengths dropped)
+  assert.equal(armSegments(f).length, 5);
+});
+
+test('arm: the ready pose points the tool down, and the base placement moves the whole arm', () => {
+  const base = { position: [0, -0.36, 0], quaternion_wxyz: [Math.SQRT1_2, 0, 0, Math.SQRT1_2] };   // turned 90° about z
+  const tool = toPose(armFrames(crs, base, crs.ready_rad)[7]);
+  const local = toPose(armFrames(crs, atOrigin, crs.ready_rad)[7]);
+  // turned by 90°: local (x, y) -> world (-y, x), shifted by the base
+  assert.ok(Math.abs(tool.position[0] - (-local.position[1])) < 1e-9);
+  assert.ok(Math.abs(tool.position[1] - (local.position[0] - 0.36)) < 1e-9);
+  assert.ok(Math.abs(tool.position[2] - local.position[2]) < 1e-9);
+  // tool z (the approach direction) points down
+  const [w, x, y, z] = tool.quaternion_wxyz;
+  const approachZ = 1 - 2 * (x * x + y * y);
+  assert.ok(approachZ < -0.999, `tool z axis has world z ${approachZ}`);
+});
+
+test('arm: a table that is not six modified-DH joints is refused naming the field', () => {
+  assert.throws(() => checkKinematics({ ...crs, joints: crs.joints.slice(0, 5) }), /kinematics\.joints: must list 6/);
+  assert.throws(() => checkKinematics({ ...crs, dh_convention: 'standard' }), /dh_convention/);
+  const bad = structuredClone(crs); bad.joints[2].a_m = 'x';
+  assert.throws(() => checkKinematics(bad), /joints\[2\]\.a_m/);
+});

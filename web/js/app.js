@@ -21,6 +21,8 @@ const ui = {
   progress: null,           // the latest execution_progress
   reportMsg: null,          // the latest report message
   poseUpdates: 0,
+  progressEvents: 0,        // execution_progress / report messages that were news (not replays)
+  reportEvents: 0,
   lastPoseUpdate: null,
   simRate_hz: null,
   consoleLines: [],         // {kind: 'cmd'|'out'|'fail'|'note', text}
@@ -151,6 +153,12 @@ link.on('world_state', (m) => {
   modelView.setCapture(m.capture ?? []);
   if (ui.selected && !m.objects.some((o) => o.name === ui.selected)) ui.selected = null;
   modelView.setDeleteCandidate(ui.selected);
+  try {
+    modelView.setRobotKinematics(m.robot?.kinematics ?? null, m.robot?.base ?? null);
+  } catch (e) {
+    showError('page', `cannot draw the arm: ${e.message}`);
+  }
+  $('arm-toggle').hidden = !m.robot?.kinematics;
   cameraView.setCameras(m.cameras);
   cameraView.setModels(m.models);
   const pathsKey = JSON.stringify([m.workpiece, m.paths]);
@@ -198,10 +206,14 @@ link.on('robot_state', (m) => {
   ui.robot = m;
   $('robot-toggle').hidden = false;
   modelView.setRobotTool(m.world_T_tool, m.gripper_width_m);
+  modelView.setRobotJoints(m.joints_rad);
 });
 $('show-robot').onchange = (e) => modelView.setRobotToolVisible(e.target.checked);
-link.on('execution_progress', (m) => { ui.progress = m; renderProgress(); });
-link.on('report', (m) => { ui.reportMsg = m; renderTask(); });
+$('show-arm').onchange = (e) => modelView.setArmVisible(e.target.checked);
+// A replayed progress or report (sent on (re)connecting, docs/protocol.md) is the state as it
+// is: shown, but not counted as an event.
+link.on('execution_progress', (m) => { ui.progress = m; if (!m.replay) ++ui.progressEvents; renderProgress(); });
+link.on('report', (m) => { ui.reportMsg = m; if (!m.replay) ++ui.reportEvents; renderTask(); });
 
 // --- task panel ---------------------------------------------------------------------------------
 
@@ -305,7 +317,7 @@ function flushMove() {
 }
 
 // A stroke the operator ended on its own (it ends a page's drag when the page's heartbeats stop
-// for 250 ms) while the mouse is still down continues as a new stroke at the next motion.
+// for its browser-link timeout) while the mouse is still down continues as a new stroke at the next motion.
 let stroke = { active: false, seenActive: false, needsBegin: false, restarts: 0 };
 
 function dragInput(phase, pose, object) {
@@ -463,6 +475,11 @@ function snapshot() {
     program: w?.program ? structuredClone(w.program) : null,
     report: w?.report ? structuredClone(w.report) : null,
     progress: ui.progress ? structuredClone(ui.progress) : null,
+    progressEvents: ui.progressEvents,
+    resync: link.resync ? structuredClone(link.resync) : null,
+    reportEvents: ui.reportEvents,
+    recognitionList: ui.recognitions ? ui.recognitions.objects.map((o) => ({ model: o.model, score: o.score,
+                                                                         position: o.world_T_object.position.slice() })) : [],
     poseUpdates: ui.poseUpdates,
     simRate_hz: ui.simRate_hz ?? w?.sim_rate_hz ?? null,
     camera: cameraView.snapshot(),

@@ -3,13 +3,13 @@
 // with back-off. Knows nothing about what the messages mean; the UI subscribes by type.
 //
 // The link runs in a dedicated worker (link_worker.js) when the browser has one: the operator
-// ends a drag when a page's heartbeats stop for 250 ms, and a page's main thread can stall that
-// long (software WebGL on a busy machine); the worker's timers are not held up by it.
+// ends a drag when a page's heartbeats stop for its browser-link timeout, and a page's main thread
+// can stall (software WebGL on a busy machine, a background tab); the worker's timers are not held up by it.
 // `LinkProxy` is the main thread's view of it, with the same interface as `Link`.
 import { kProtocolVersion, Sequencer, SeqTracker, parseBinaryFrame } from './protocol.js';
 
 const kDefaultHeartbeat_s = 0.05;
-const kDefaultTimeout_s = 0.25;
+const kDefaultTimeout_s = 2.0;   // until welcome.link_timeout_s says otherwise
 
 export class Link {
   constructor(url, { clientName = 'teachsim-web', clock = () => performance.now() / 1000 } = {}) {
@@ -54,6 +54,7 @@ export class Link {
 
   status() {
     return { state: this.state, stateReason: this.stateReason ?? '', session: this.session, leaseHolder: this.leaseHolder,
+             resync: this.resync ? { world_ms: this.resync.world_ms, progress_ms: this.resync.progress_ms } : null,
              rtt_s: this.rtt_s, reconnects: this.reconnects, errorsReceived: this.errorsReceived, open: !!(this.ws && this.ws.readyState === 1) };
   }
 
@@ -133,9 +134,9 @@ export class Link {
     }
     this.send('heartbeat', hb);
     this.peerSilent_s = now - this.lastRx_s;
-    // The page's own main thread can stall for a few hundred ms (software WebGL, a busy tab): the
-    // operator's 250 ms watchdog is for the robot; the page reports silence only past 1 s.
-    if (this.state === 'up' && this.peerSilent_s > Math.max(1, 4 * this.timeout_s)) {
+    // The operator's browser-link timeout (welcome.link_timeout_s, 2 s by default: browsers
+    // throttle background tabs) is the page's too; at least 1 s, for a stalled main thread.
+    if (this.state === 'up' && this.peerSilent_s > Math.max(1, this.timeout_s)) {
       this.setState('silent', `operator silent for ${this.peerSilent_s.toFixed(2)} s`);
     }
   }
@@ -165,8 +166,17 @@ export class Link {
       return;
     }
     this.checkSeq(msg.seq, msg.type);
+    // How long after welcome the session's state arrived (docs/protocol.md, "Resynchronising"),
+    // measured where the messages arrive, not where the page draws them.
+    if (this.resync && msg.type === 'world_state' && this.resync.world_ms === null) {
+      this.resync.world_ms = (this.now() - this.resync.t0_s) * 1000;
+    }
+    if (this.resync && msg.type === 'execution_progress' && msg.replay && this.resync.progress_ms === null) {
+      this.resync.progress_ms = (this.now() - this.resync.t0_s) * 1000;
+    }
     switch (msg.type) {
       case 'welcome':
+        this.resync = { t0_s: this.now(), world_ms: null, progress_ms: null };
         this.session = msg.session;
         this.leaseHolder = msg.lease_holder ?? null;
         if (msg.heartbeat_period_s > 0) this.heartbeat_s = msg.heartbeat_period_s;

@@ -6,6 +6,7 @@ import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
 import { ConvexGeometry } from 'three/addons/geometries/ConvexGeometry.js';
 import { PlaneDrag } from './drag_math.js';
+import { checkKinematics, armFrames, armSegments, matrixToQuat } from './kinematics.js';
 
 const kWoods = [0xd9a866, 0xc98f55, 0xe3bd84, 0xb97b45, 0xdcb07a, 0xc49a6c];
 const kTableColor = 0xcfc8b8;
@@ -348,6 +349,98 @@ export class ModelView {
     this.requestRender();
   }
 
+  // --- the whole arm (issue 8 §4: a toggle shows it) ----------------------------------------------
+
+  // The robot's table (world_state.robot.kinematics) and placement; null: no arm can be drawn.
+  setRobotKinematics(kinematics, world_T_base) {
+    const key = JSON.stringify([kinematics, world_T_base]);
+    if (key === this.armKey) return;
+    this.armKey = key;
+    this.kinematics = kinematics && world_T_base ? checkKinematics(kinematics) : null;
+    this.worldTBase = world_T_base ?? null;
+    this.updateArm();
+  }
+
+  // The joint angles the work site streams (robot_state.joints_rad).
+  setRobotJoints(joints_rad) { this.armJoints = joints_rad.slice(); if (this.armVisible) this.updateArm(); }
+
+  setArmVisible(visible) {
+    const turnedOn = visible && !this.armVisible;
+    this.armVisible = visible;
+    this.updateArm();
+    if (turnedOn && this.arm.visible) this.frameArm();
+  }
+
+  // Pulls the view back (same direction) until the arm and the work area both fit: the robot
+  // stands at the edge of the table, mostly outside the default view.
+  frameArm() {
+    const box = new THREE.Box3().setFromObject(this.arm);
+    box.expandByObject(this.worldGroup);
+    const sphere = box.getBoundingSphere(new THREE.Sphere());
+    const dir = this.camera.position.clone().sub(this.controls.target).normalize();
+    const halfFov = THREE.MathUtils.degToRad(this.camera.fov / 2);
+    const fit = Math.min(halfFov, Math.atan(Math.tan(halfFov) * this.camera.aspect));
+    const distance = sphere.radius / Math.sin(fit) * 1.02;
+    this.controls.target.copy(sphere.center);
+    this.camera.position.copy(sphere.center).addScaledVector(dir, distance);
+    this.camera.far = Math.max(this.camera.far, distance * 4);
+    this.camera.updateProjectionMatrix();
+    this.controls.update();
+    this.requestRender();
+  }
+
+  // Links as grey cylinders between successive DH frame origins, joints as dark spheres, the
+  // flange-to-tool stretch thinner (the gripper itself is the robot tool drawn by setRobotTool).
+  updateArm() {
+    if (!this.arm) {
+      this.arm = new THREE.Group();
+      this.arm.name = 'arm';
+      this.armLinkMaterial = new THREE.MeshStandardMaterial({ color: 0xe8e4da, roughness: 0.5, metalness: 0.1 });
+      this.armJointMaterial = new THREE.MeshStandardMaterial({ color: 0x3b3f45, roughness: 0.4, metalness: 0.3 });
+      this.armCylinder = new THREE.CylinderGeometry(1, 1, 1, 20);
+      this.armSphere = new THREE.SphereGeometry(1, 20, 12);
+      this.scene.add(this.arm);
+    }
+    const show = !!(this.armVisible && this.kinematics && this.armJoints);
+    this.arm.visible = show;
+    this.armTool = null;
+    if (show) {
+      const frames = armFrames(this.kinematics, this.worldTBase, this.armJoints);
+      const segments = armSegments(frames);
+      while (this.arm.children.length) this.arm.remove(this.arm.children[0]);
+      const up = new THREE.Vector3(0, 1, 0);
+      // a pedestal under the base frame, down to the table
+      const base = frames[0].p;
+      const pedestal = new THREE.Mesh(this.armCylinder, this.armJointMaterial);
+      pedestal.scale.set(0.07, Math.max(0.01, base[2] + 0.025), 0.07);
+      pedestal.position.set(base[0], base[1], (base[2] - 0.025) / 2);
+      pedestal.quaternion.setFromUnitVectors(up, new THREE.Vector3(0, 0, 1));
+      this.arm.add(pedestal);
+      segments.forEach((s, i) => {
+        const a = new THREE.Vector3(...s.from);
+        const b = new THREE.Vector3(...s.to);
+        const d = b.clone().sub(a);
+        const last = i === segments.length - 1;
+        const radius = last ? 0.012 : i === 0 ? 0.05 : 0.035;
+        const link = new THREE.Mesh(this.armCylinder, this.armLinkMaterial);
+        link.scale.set(radius, d.length(), radius);
+        link.position.copy(a).add(b).multiplyScalar(0.5);
+        link.quaternion.setFromUnitVectors(up, d.normalize());
+        link.userData.armLink = i;
+        this.arm.add(link);
+        const joint = new THREE.Mesh(this.armSphere, this.armJointMaterial);
+        joint.scale.setScalar(last ? 0.016 : radius * 1.1);
+        joint.position.copy(a);
+        this.arm.add(joint);
+      });
+      this.arm.traverse((c) => { c.raycast = () => {}; });   // the arm is not clickable
+      this.armSegmentCount = segments.length;
+      const tool = frames[frames.length - 1];
+      this.armTool = { position: tool.p.slice(), quaternion_wxyz: matrixToQuat(tool.R) };
+    }
+    this.requestRender();
+  }
+
   setRobotToolVisible(visible) {
     this.robotToolVisible = visible;
     if (this.robotTool) { this.robotTool.visible = visible; this.requestRender(); }
@@ -554,6 +647,9 @@ export class ModelView {
       draggerPosition: this.dragger.visible ? this.dragger.position.toArray() : null,
       ghosts: { ...this.ghostCounts },
       robotToolVisible: !!(this.robotTool && this.robotTool.visible),
+      arm: { available: !!this.kinematics, visible: !!(this.arm && this.arm.visible),
+             links: this.arm && this.arm.visible ? this.armSegmentCount : 0,
+             tool: this.armTool ? structuredClone(this.armTool) : null },
     };
   }
 }

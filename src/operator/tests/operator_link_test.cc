@@ -110,6 +110,9 @@ TEST(OperatorLink, LinkCutMidExecutionStopsTheRobotAndReconnectResynchronises) {
   EXPECT_TRUE((*second.Last(MessageType::kLinkState))["stopped"].get<bool>());
   EXPECT_EQ((*second.Last(MessageType::kExecutionProgress))["state"], "stopped");
   EXPECT_FALSE((*second.Last(MessageType::kReport))["ok"].get<bool>());
+  // State, not news: the replayed progress and report say so.
+  EXPECT_TRUE(second.Last(MessageType::kExecutionProgress)->value("replay", false));
+  EXPECT_TRUE(second.Last(MessageType::kReport)->value("replay", false));
   EXPECT_TRUE((*second.Last(MessageType::kRobotState))["stopped"].get<bool>());
   // Latched: no program until resume.
   ASSERT_TRUE(second.TakeLease());
@@ -220,7 +223,31 @@ TEST(OperatorLink, ConfirmExecuteReportThroughTheOperatorSite) {
   ASSERT_TRUE(stopped.has_value()) << b.Last(MessageType::kWorldState)->at("link").dump() << " latched "
                                    << site->stats().latched;
   EXPECT_TRUE(site->stats().latched);
-  (void)n;
+  // The reconnect resynchronised the state without replaying old events as news: the work site's
+  // replayed progress and report (marked "replay") matched what the operator had, so the browser
+  // got no second report, no progress event and no console line about them.
+  auto after_cut = [&](MessageType type, const std::function<bool(const Json&)>& pred) {
+    std::size_t count = 0;
+    for (std::size_t i = n; i < b.messages.size(); ++i) count += b.messages[i].type == type && pred(b.messages[i].body) ? 1 : 0;
+    return count;
+  };
+  auto any = [](const Json&) { return true; };
+  EXPECT_EQ(after_cut(MessageType::kReport, any), 0u);
+  EXPECT_EQ(after_cut(MessageType::kExecutionProgress, any), 0u);
+  EXPECT_EQ(after_cut(MessageType::kConsoleOutput, [](const Json& j) {
+              const std::string text = j["text"].get<std::string>();
+              return text.rfind("report ", 0) == 0 || text.rfind("execution ", 0) == 0;
+            }), 0u);
+  EXPECT_TRUE((*stopped)["report"].is_object());  // the report is still the state
+  // A browser connecting now gets the execution's last progress as state (marked as a replay).
+  {
+    Browser late((*op_service)->port());
+    ASSERT_TRUE(late.Ready());
+    auto progress = late.WaitMessage(MessageType::kExecutionProgress, [](const Json&) { return true; }, 0, 2);
+    ASSERT_TRUE(progress.has_value());
+    EXPECT_TRUE(progress->value("replay", false));
+    EXPECT_NE((*progress)["state"], "running");
+  }
   Json resume = b.Command("resume");
   EXPECT_TRUE(resume["ok"].get<bool>()) << resume["text"];
   ASSERT_TRUE(b.WaitWorld([](const Json& j) { return j["link"]["state"] == "up" && !j["link"]["stopped"].get<bool>(); }, 5));
@@ -255,6 +282,100 @@ TEST(OperatorLink, WorkSiteStreamsCameraFramesAtFiveHertz) {
   }
   EXPECT_GT(hi - lo, 60);
   EXPECT_GE(b.Count(MessageType::kRobotState), std::getenv("TEACHSIM_SANITIZER_BUILD") ? 5u : 40u);  // ~20 Hz
+}
+
+// A stand-in work site that announces the puzzle scene and a fixed set of recognitions.
+struct FakeSite : net::ServerHandler {
+  net::EventLoop loop;
+  net::SteadyClock clock;
+  scene::Scene scene = Puzzle();
+  Json recognitions;
+  std::unique_ptr<net::Server> server;
+  std::unique_ptr<net::LoopThread> thread;
+
+  explicit FakeSite(Json objects) : recognitions{{"frame_seq", 0}, {"camera", 0}, {"objects", std::move(objects)}} {
+    net::ServerOptions o;
+    o.token = kToken;
+    server = std::make_unique<net::Server>(loop, clock, o, *this);
+    EXPECT_TRUE(server->Start().ok());
+    thread = std::make_unique<net::LoopThread>(loop);
+  }
+  ~FakeSite() override {
+    std::promise<void> done;
+    loop.Post([&] {
+      server->Stop();
+      done.set_value();
+    });
+    done.get_future().wait();
+    thread.reset();
+  }
+  void OnOpen(net::Server& s, net::SessionId session) override {
+    (void)s.Send(session, MessageType::kWorksiteScene,
+                 {{"scene", scene::SceneToJson(scene)}, {"models", worksite::ModelsFromScene(scene)}});
+    (void)s.Send(session, MessageType::kRecognitions, recognitions);
+  }
+};
+
+Json Recognition(const std::string& model, double x, double y, double z) {
+  return {{"model", model}, {"world_T_object", PoseJson(x, y, z)}, {"score", 0.8}};
+}
+
+TEST(OperatorLink, TheModelEditorRestsCorrectsAddsAndRefusesRecognitions) {
+  // 0: the cube seen 0.8 mm off and sunk 0.5 mm into the table; 1: a bar where the model has
+  // nothing, hovering 3 mm; 2: a cube inside the plate.
+  FakeSite site(Json::array({Recognition("cube45", 0.0308, 0.02, 0.02275 - 0.0005),
+                             Recognition("bar90", 0.0, 0.2, 0.02275 + 0.003),
+                             Recognition("cube45", 0.19, -0.09, 0.02)}));
+  net::SteadyClock clock;
+  OperatorOptions o;
+  o.http_port = 0;
+  o.worksite = "127.0.0.1:" + std::to_string(site.server->port());
+  o.token = kToken;
+  auto op_service = OperatorService::Create(clock, o);
+  ASSERT_TRUE(op_service.ok()) << op_service.status().message();
+  ASSERT_TRUE((*op_service)->Start().ok());
+  Browser b((*op_service)->port());
+  ASSERT_TRUE(b.Ready());
+  ASSERT_TRUE(b.WaitWorld([](const Json& j) { return j["objects"].size() == 7 && !j["models"].empty(); }).has_value());
+  ASSERT_TRUE(b.WaitMessage(MessageType::kRecognitions, [](const Json& j) { return j["objects"].size() == 3; }).has_value());
+  ASSERT_TRUE(b.TakeLease());
+
+  // The cube seen again: its pose is corrected (no duplicate), resting 0.25 mm above the table.
+  Json out = b.Command("add 0");
+  ASSERT_TRUE(out["ok"].get<bool>()) << out["text"];
+  EXPECT_EQ(out["text"].get<std::string>().rfind("updated cube from recognition 0", 0), 0u) << out["text"];
+  EXPECT_NE(out["text"].get<std::string>().find("resting on table"), std::string::npos) << out["text"];
+  auto w = b.WaitWorld([](const Json& j) { return FindObject(j, "cube") && (*FindObject(j, "cube"))["origin"] == "recognized"; });
+  ASSERT_TRUE(w.has_value());
+  EXPECT_EQ((*w)["objects"].size(), 7u);
+  const Json& cube = (*FindObject(*w, "cube"))["world_T_object"]["position"];
+  EXPECT_NEAR(cube[0].get<double>(), 0.0308, 1e-9);
+  EXPECT_NEAR(cube[2].get<double>(), 0.0225 + 0.25e-3, 1e-9);
+
+  // Nothing of that model there: a new movable object, resting on the table.
+  out = b.Command("add 1");
+  ASSERT_TRUE(out["ok"].get<bool>()) << out["text"];
+  EXPECT_EQ(out["text"].get<std::string>().rfind("added bar90_1 ", 0), 0u) << out["text"];
+  w = b.WaitWorld([](const Json& j) { return FindObject(j, "bar90_1") != nullptr; });
+  ASSERT_TRUE(w.has_value());
+  const Json& bar = *FindObject(*w, "bar90_1");
+  EXPECT_EQ(bar["origin"], "recognized");
+  EXPECT_FALSE(bar["fixed"].get<bool>());
+  EXPECT_NEAR(bar["world_T_object"]["position"][2].get<double>(), 0.0225 + 0.25e-3, 1e-9);
+
+  // Inside the plate: refused, naming it; the model is unchanged.
+  const std::uint64_t revision = (*op_service)->snapshot().revision;
+  out = b.Command("add 2");
+  EXPECT_FALSE(out["ok"].get<bool>());
+  EXPECT_NE(out["text"].get<std::string>().find("plate"), std::string::npos) << out["text"];
+  EXPECT_EQ((*op_service)->snapshot().objects.size(), 8u);
+  EXPECT_EQ((*op_service)->snapshot().revision, revision);
+  // Indices out of range and read-only watchers are refused too.
+  EXPECT_FALSE(b.Command("add 3")["ok"].get<bool>());
+  Browser watcher((*op_service)->port());
+  ASSERT_TRUE(watcher.Ready());
+  EXPECT_EQ(watcher.Command("add 1")["text"].get<std::string>().rfind("read-only", 0), 0u);
+  (*op_service)->Stop();
 }
 
 }  // namespace

@@ -26,6 +26,7 @@ struct Fixture {
     OperatorOptions o;
     o.http_port = 0;
     o.sessions_dir = sessions;
+    o.robots_dir = std::string(TEACHSIM_SOURCE_DIR) + "/robots";
     auto scene = scene::LoadScene(std::string(TEACHSIM_SOURCE_DIR) + "/scenes/puzzle.json");
     EXPECT_TRUE(scene.ok()) << scene.status().message();
     o.initial_scene = *scene;
@@ -295,6 +296,67 @@ TEST(OperatorService, ABrowserKilledMidDragEndsTheDrag) {
   EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 2.0);
   // The lease went with the dead session: the other browser may take it.
   EXPECT_TRUE(other.TakeLease());
+}
+
+TEST(OperatorService, TheLeaseIsFreeTheMomentItsHoldersSocketCloses) {
+  Fixture f("lease-close");
+  auto holder = std::make_unique<Browser>(f.service->port());
+  Browser watcher(f.service->port());
+  ASSERT_TRUE(holder->Ready());
+  ASSERT_TRUE(watcher.Ready());
+  ASSERT_TRUE(holder->TakeLease());
+  ASSERT_TRUE(watcher.WaitMessage(MessageType::kLeaseState, [](const Json& j) { return !j["holder"].is_null(); }).has_value());
+  const std::size_t from = watcher.messages.size();
+  holder->client->Abort();  // the socket closes: a closed tab, a killed browser
+  const auto t0 = std::chrono::steady_clock::now();
+  ASSERT_TRUE(watcher.WaitMessage(MessageType::kLeaseState, [](const Json& j) { return j["holder"].is_null(); }, from, 5).has_value());
+  const double free_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("lease free %.0f ms after the holder's socket closed\n", free_s * 1e3);
+  // At once: well before the browser-link timeout (2 s) and the silent session's close (5 s).
+  EXPECT_LT(free_s, 0.5);
+  EXPECT_TRUE(watcher.TakeLease());
+}
+
+TEST(OperatorService, TheBrowserLinkHasItsOwnLongerTimeout) {
+  Fixture f("browser-timeout");
+  Browser b(f.service->port());
+  ASSERT_TRUE(b.Ready());
+  ASSERT_TRUE(b.TakeLease());
+  // The page is told the browser link's timeout (not the work site's 250 ms).
+  auto welcome = b.Last(MessageType::kWelcome);
+  ASSERT_TRUE(welcome.has_value());
+  EXPECT_EQ((*welcome)["link_timeout_s"].get<double>(), OperatorOptions{}.browser_link_timeout_s);
+  EXPECT_GE(OperatorOptions{}.browser_link_timeout_s, 1.5);
+  EXPECT_EQ(OperatorOptions{}.link_timeout_s, 0.25);
+  Json w = *b.Last(MessageType::kWorldState);
+  const Json start = (*FindObject(w, "cube"))["world_T_object"];
+  ASSERT_TRUE(b.client->Send(MessageType::kDraggerInput, {{"object", "cube"}, {"phase", "begin"}, {"world_T_dragger", start}}).ok());
+  ASSERT_TRUE(b.WaitWorld([](const Json& j) { return j["dragging"].get<bool>(); }));
+  // Silent for 0.6 s (a background tab's throttled timers): the drag goes on.
+  b.client->PauseHeartbeats(true);
+  b.loop.RunFor(std::chrono::milliseconds(600));
+  EXPECT_TRUE(f.service->snapshot().dragging) << "a 0.6 s silence ended the drag";
+  // Past the timeout the page is lost and its drag ends (the socket is still open).
+  const auto t0 = std::chrono::steady_clock::now();
+  ASSERT_TRUE(b.WaitFor([&] { return !f.service->snapshot().dragging; }, 5));
+  const double ended_s = 0.6 + std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("drag ended %.2f s into the page's silence\n", ended_s);
+  EXPECT_GT(ended_s, OperatorOptions{}.browser_link_timeout_s - 0.1);
+  EXPECT_LT(ended_s, OperatorOptions{}.browser_link_timeout_s + 1.0);
+}
+
+TEST(OperatorService, WorldStateCarriesTheArmsKinematicsForTheWholeArmView) {
+  Fixture f("arm");
+  Browser b(f.service->port());
+  ASSERT_TRUE(b.Ready());
+  const Json w = *b.Last(MessageType::kWorldState);
+  ASSERT_TRUE(w["robot"].is_object());
+  EXPECT_EQ(w["robot"]["model"], "crs_a465");
+  ASSERT_TRUE(w["robot"].contains("kinematics"));
+  const Json& k = w["robot"]["kinematics"];
+  ASSERT_EQ(k["joints"].size(), 6u);
+  EXPECT_DOUBLE_EQ(k["joints"][0]["d_m"].get<double>(), 0.33);  // d1 of robots/crs_a465.json
+  EXPECT_DOUBLE_EQ(k["flange_T_tool"]["position"][2].get<double>(), 0.13);
 }
 
 }  // namespace

@@ -32,13 +32,21 @@ struct OperatorOptions {
   std::uint16_t http_port = 8080;  // 0: a free port (see OperatorService::port())
   std::string web_root;            // static files; empty: none
   std::string sessions_dir = "sessions";
+  // The robot tables (robots/NAME.json) for the model view's whole arm: world_state.robot carries
+  // the placed robot's kinematics when its table is found here. Empty: no arm is drawn.
+  std::string robots_dir;
   // The work site: "HOST:PORT" or "ws://HOST:PORT/PATH"; empty: none (the model is
   // `initial_scene`, programs cannot be executed).
   std::string worksite;
   net::Token token;                       // for the work-site link
   std::optional<scene::Scene> initial_scene;  // the model before (or without) the work site's scene
   double heartbeat_period_s = 0.05;
-  double link_timeout_s = 0.25;
+  double link_timeout_s = 0.25;  // the work-site link: silence that stops the robot (issue 8)
+  // The browser link: silence after which a page counts as lost (its drag ends). Longer than the
+  // work site's: browsers throttle timers in background tabs to about 1 Hz, and a page's drag
+  // moves only the model, never the robot. The session is closed after
+  // max(5 s, 2 x this) of silence; a closed socket releases the lease at once.
+  double browser_link_timeout_s = 2.0;
   double reconnect_period_s = 0.5;  // after the work-site link closed
   // The demonstration (paper §5): simulator steps per wall-clock second (each step is
   // sim.step_s of simulated time: the paper's 50 ms, run faster when the machine allows).
