@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
+#include <variant>
 
 #include "commands.h"
 #include "teachsim/robot/program.h"
@@ -30,6 +31,7 @@ struct ExecuteArgs {
   std::uint64_t seed = 1;
   double friction_bound = -1;  // < 0: the controller's default
   bool no_clip = false;
+  double contact_speed_mps = 0;  // > 0: every contact move at this speed (ablation)
 };
 
 int RunExecute(const ExecuteArgs& a) {
@@ -38,6 +40,11 @@ int RunExecute(const ExecuteArgs& a) {
   if (!scene->robot) return ReportError(Status::InvalidInput(a.scene + ": the scene places no robot"));
   auto program = robot::LoadProgram(a.program);
   if (!program.ok()) return ReportError(program.status());
+  if (a.contact_speed_mps > 0) {
+    for (robot::Command& c : program->commands) {
+      if (auto* move = std::get_if<robot::ContactMoveCommand>(&c)) move->speed_mps = a.contact_speed_mps;
+    }
+  }
   auto model = robot::LoadRobotModel(DataPath("robots/" + scene->robot->model + ".json"));
   if (!model.ok()) return ReportError(model.status());
 
@@ -146,6 +153,10 @@ void AddExecuteCommand(CLI::App& app, Runner* run) {
       "--friction-bound", a->friction_bound,
       "monitor: friction coefficient allowed for at the other contacts (default 0: the plain check)");
   sub->add_flag("--no-clip", a->no_clip, "ablation: no velocity clipping of the admittance output");
+  sub->add_option("--contact-speed", a->contact_speed_mps,
+                  "ablation: run every contact move at this speed (m/s; the approach speed into contact; the "
+                  "safety limit is 0.05)")
+      ->check(CLI::PositiveNumber);
   sub->add_option("--frames", a->frames,
                   "write camera images of the executing world (robot included) to this folder, with frames.json");
   sub->add_option("--frame-period", a->frame_period_s, "simulated seconds between frames")->capture_default_str();

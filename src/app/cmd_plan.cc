@@ -1,6 +1,7 @@
 // teachsim plan --scene FILE --path PATH.json --out PROGRAM.json [--listing] [--paths-prefix P]
 #include <cmath>
 #include <memory>
+#include <optional>
 
 #include "commands.h"
 #include "plan_report.h"
@@ -24,6 +25,14 @@ void PrintPlanMetrics(const plan::PlanMetrics& m) {
   std::printf("  deformation         %d iterations (%s), %.1f ms; simplification %.1f ms; total %.1f ms\n",
               m.iterations, m.band_converged ? "settled" : "budget used up, not settled", m.deform_ms, m.simplify_ms,
               m.total_ms);
+  if (m.robot_checked) {
+    std::printf("  grasp               turned %.0f deg about the tool axis; gripper %.1f mm from the scene; "
+                "|sin theta5| >= %.2f, elbow >= %.2f, shoulder >= %.0f mm\n",
+                m.grasp_yaw_deg, m.min_gripper_clearance_m * 1e3, m.min_wrist_measure, m.min_elbow_measure,
+                m.min_shoulder_m * 1e3);
+  } else {
+    std::printf("  grasp               unchecked (no robot)\n");
+  }
 }
 
 Status WritePlanOutputs(const plan::PlanResult& result, const std::string& program_file, const std::string& prefix) {
@@ -44,7 +53,15 @@ int RunPlan(const std::string& scene_path, const std::string& path_file, const s
   if (!scene.ok()) return ReportError(scene.status());
   auto path = sim::LoadPath(path_file);
   if (!path.ok()) return ReportError(path.status());
-  auto result = plan::GenerateProgram(*scene, *path);
+  // The arm the scene places: the grasp is chosen and checked with it (reach, limits,
+  // singularities, the gripper against the scene).
+  std::optional<robot::RobotModel> model;
+  if (scene->robot) {
+    auto loaded = robot::LoadRobotModel(DataPath("robots/" + scene->robot->model + ".json"));
+    if (!loaded.ok()) return ReportError(loaded.status());
+    model = std::move(loaded).value();
+  }
+  auto result = plan::GenerateProgram(*scene, *path, {}, model ? &*model : nullptr);
   if (!result.ok()) return ReportError(result.status().WithPrefix(path_file));
   if (Status s = WritePlanOutputs(*result, out, prefix); !s.ok()) return ReportError(s);
   std::printf("program for '%s' -> %s\n", result->program.workpiece.c_str(), out.c_str());

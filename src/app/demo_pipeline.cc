@@ -410,7 +410,7 @@ Status RunOne(const DemoOptions& options, const DemoSpec& spec, const DemoWorld&
 
   // --- 4: the program (paper §6).
   t0 = Clock::now();
-  auto planned = plan::GenerateProgram(w.operator_scene, *path);
+  auto planned = plan::GenerateProgram(w.operator_scene, *path, {}, &model);
   if (!planned.ok()) {
     Fail(options, run, 4, "the program generator failed: " + planned.status().message(), Seconds(t0));
     return Status::Ok();

@@ -3,10 +3,14 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <limits>
 
 #include "teachsim/geometry/toi.h"
+#include "teachsim/robot/controller.h"
+#include "teachsim/robot/kinematics.h"
+#include "teachsim/robot/safety.h"
 
 namespace teachsim::plan {
 
@@ -42,7 +46,9 @@ Status PlanOptions::Validate() const {
         {"bias_depth_m", bias_depth_m}, {"max_bias_m", max_bias_m},
         {"contact_stiffness_n_per_m", contact_stiffness_n_per_m},
         {"contact_damping_n_s_per_m", contact_damping_n_s_per_m}, {"threshold_fraction", threshold_fraction},
-        {"retreat_m", retreat_m}}) {
+        {"retreat_m", retreat_m}, {"gripper_clearance_m", gripper_clearance_m},
+        {"min_wrist_measure", min_wrist_measure}, {"min_elbow_measure", min_elbow_measure},
+        {"min_shoulder_m", min_shoulder_m}, {"check_step_m", check_step_m}, {"check_step_rad", check_step_rad}}) {
     if (!(std::isfinite(value) && value > 0.0)) {
       return Status::InvalidInput(std::string("PlanOptions::") + field + " = " + json::FormatNumber(value) + " must be > 0");
     }
@@ -460,7 +466,7 @@ std::vector<int> Simplify(const sim::SimWorld& world, const Band& band, const Pl
 }
 
 Result<robot::Program> MakeProgram(const sim::SimWorld& world, const Band& band, const std::vector<int>& knots,
-                                   const PlanOptions& o) {
+                                   const PlanOptions& o, double grasp_yaw_rad) {
   const scene::SceneObject& wp = Object(world, band.workpiece);
   const geometry::Aabb box = wp.shape.WorldBounds(geometry::Pose3::Identity());
   robot::Program program;
@@ -470,15 +476,25 @@ Result<robot::Program> MakeProgram(const sim::SimWorld& world, const Band& band,
   // On a thin block, a biased target must not drive the fingertips into what the block rests on:
   // they stay at least d (plus 1 mm) above its bottom.
   const double grip = std::min(o.grip_depth_m, std::max(0.003, box.Size().z() - o.bias_depth_m - 0.001));
+  // A grasp turned by grasp_yaw_rad about the tool axis (multiples of 90 degrees for a box) closes
+  // the jaws across the block's extent along the turned tool y.
   program.workpiece_T_tool =
       geometry::Pose3(Eigen::Quaterniond(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX())),
                       Eigen::Vector3d(box.Center().x(), box.Center().y(), box.max.z() - grip));
+  if (grasp_yaw_rad != 0.0) {
+    program.workpiece_T_tool = program.workpiece_T_tool *
+                               geometry::Pose3(Eigen::Quaterniond(Eigen::AngleAxisd(grasp_yaw_rad, Eigen::Vector3d::UnitZ())),
+                                               Eigen::Vector3d::Zero());
+  }
+  const Eigen::Vector3d jaw_axis = program.workpiece_T_tool.rotation * Eigen::Vector3d::UnitY();
+  const double width = std::abs(jaw_axis.x()) * box.Size().x() + std::abs(jaw_axis.y()) * box.Size().y() +
+                       std::abs(jaw_axis.z()) * box.Size().z();
   auto tool = [&](const geometry::Pose3& world_T_workpiece) { return world_T_workpiece * program.workpiece_T_tool; };
 
   robot::GraspCommand grasp;
   grasp.world_T_tool = tool(band.nodes.front().pose);
-  grasp.width_m = box.Size().y();
-  grasp.open_width_m = box.Size().y() + 0.015;  // 7.5 mm each side; within the 80 mm jaws for 60 mm blocks
+  grasp.width_m = width;
+  grasp.open_width_m = width + 0.015;  // 7.5 mm each side; within the 80 mm jaws for 60 mm blocks
   program.commands.push_back(grasp);
 
   sim::SimState state;
@@ -530,6 +546,137 @@ Result<robot::Program> MakeProgram(const sim::SimWorld& world, const Band& band,
   return program;
 }
 
+std::vector<ToolSample> SampleProgram(const robot::Program& program, const geometry::Pose3& start, double start_width_m,
+                                      double step_m, double step_rad) {
+  std::vector<ToolSample> out;
+  geometry::Pose3 pose = start;
+  double width = start_width_m;
+  out.push_back({pose, width, "start"});
+  auto line = [&](const geometry::Pose3& goal, const std::string& what) {
+    const double length = (goal.translation - pose.translation).norm();
+    const double angle = geometry::RotationAngle(pose, goal);
+    const int steps = std::max(1, static_cast<int>(std::ceil(std::max(length / step_m, angle / step_rad))));
+    for (int k = 1; k <= steps; ++k) {
+      const double u = static_cast<double>(k) / steps;
+      out.push_back({geometry::Interpolate(pose, goal, u), width, what + " at " + std::to_string(std::lround(100 * u)) + "%"});
+    }
+    pose = goal;
+  };
+  for (std::size_t i = 0; i < program.commands.size(); ++i) {
+    const robot::Command& command = program.commands[i];
+    const std::string what = "commands[" + std::to_string(i) + "] (" + robot::CommandType(command) + ")";
+    if (const auto* g = std::get_if<robot::GraspCommand>(&command)) {
+      width = g->open_width_m;
+      line(g->ApproachPose(), what + " approach");
+      line(g->world_T_tool, what + " descent");
+      width = g->width_m;
+      out.push_back({pose, width, what + " closed"});
+    } else if (const auto* m = std::get_if<robot::MoveCommand>(&command)) {
+      line(m->world_T_tool, what);
+    } else if (const auto* c = std::get_if<robot::ContactMoveCommand>(&command)) {
+      line(c->world_T_tool, what);  // the nominal target: the bias only presses the workpiece into its contacts
+    } else if (const auto* r = std::get_if<robot::ReleaseCommand>(&command)) {
+      width = r->width_m;
+      out.push_back({pose, width, what});
+    } else if (const auto* t = std::get_if<robot::RetreatCommand>(&command)) {
+      geometry::Pose3 up = pose;
+      up.translation.z() += t->distance_m;
+      line(up, what);
+    }
+  }
+  return out;
+}
+
+namespace {
+
+std::string Mm(const Eigen::Vector3d& p) {
+  char text[96];
+  std::snprintf(text, sizeof text, "(%.1f, %.1f, %.1f) mm", p.x() * 1e3, p.y() * 1e3, p.z() * 1e3);
+  return text;
+}
+
+}  // namespace
+
+GraspReport CheckWithRobot(const sim::SimWorld& world, const robot::RobotModel& model,
+                           const geometry::Pose3& world_T_base, const robot::Program& program, const PlanOptions& o) {
+  GraspReport report;
+  report.min_gripper_clearance_m = kInf;
+  report.min_wrist_measure = report.min_elbow_measure = kInf;
+  report.min_shoulder_m = kInf;
+  // What the work site's controller checks before any motion (reach, limits, joint speeds, widths).
+  const robot::ControllerOptions controller;
+  if (Status s = robot::CheckProgram(model, world_T_base, program, model.ready_rad, controller.limits, controller.safety);
+      !s.ok()) {
+    report.problem = s.message();
+  }
+  const int workpiece = world.scene.FindObject(program.workpiece);
+  const geometry::Pose3 base_T_world = world_T_base.Inverse();
+  // The arm starts at its ready joints with the jaws open (as the work site starts it).
+  const std::vector<ToolSample> samples =
+      SampleProgram(program, world_T_base * robot::ToolPose(model, model.ready_rad), 0.9 * model.gripper.max_width_m,
+                    o.check_step_m, o.check_step_rad);
+  std::vector<geometry::Shape> shapes;
+  const std::vector<robot::GripperBox> layout = robot::GripperBoxes(model.gripper, 0.0);
+  for (const robot::GripperBox& b : layout) {
+    auto box = geometry::ConvexPolyhedron::Box(b.size_m);
+    TEACHSIM_CHECK(box.ok());
+    shapes.push_back(geometry::Shape::Single(std::move(box).value()));
+  }
+  robot::Joints q = model.ready_rad;
+  std::string singular_problem, gripper_problem;
+  char text[400];
+  for (const ToolSample& sample : samples) {
+    // The joints the controller will take there: the IK solution nearest the previous one.
+    auto ik = robot::NearestToolIk(model, base_T_world * sample.world_T_tool, q);
+    if (!ik.ok()) {
+      if (report.problem.empty()) report.problem = sample.what + ": " + ik.status().message();
+    } else {
+      q = ik->q;
+      const robot::Singularities s = robot::DetectSingularities(model, q);
+      report.min_wrist_measure = std::min(report.min_wrist_measure, s.wrist_measure);
+      report.min_elbow_measure = std::min(report.min_elbow_measure, s.elbow_measure);
+      report.min_shoulder_m = std::min(report.min_shoulder_m, s.shoulder_measure_m);
+      if (singular_problem.empty() && (s.wrist_measure < o.min_wrist_measure || s.elbow_measure < o.min_elbow_measure ||
+                                       s.shoulder_measure_m < o.min_shoulder_m)) {
+        std::snprintf(text, sizeof text,
+                      "%s: the arm comes near a singularity with the tool at %s (|sin theta5| = %.3f, elbow %.3f, "
+                      "shoulder %.1f mm; the program asks for at least %.2f, %.2f, %.1f mm)",
+                      sample.what.c_str(), Mm(sample.world_T_tool.translation).c_str(), s.wrist_measure,
+                      s.elbow_measure, s.shoulder_measure_m * 1e3, o.min_wrist_measure, o.min_elbow_measure,
+                      o.min_shoulder_m * 1e3);
+        singular_problem = text;
+      }
+    }
+    // Palm and fingers against everything but the workpiece (which the pads hold or are about to).
+    const std::vector<robot::GripperBox> boxes = robot::GripperBoxes(model.gripper, sample.width_m);
+    for (std::size_t b = 0; b < boxes.size(); ++b) {
+      const geometry::Pose3 world_T_box = sample.world_T_tool * boxes[b].tool_T_box;
+      for (int obj = 0; obj < static_cast<int>(world.scene.objects.size()); ++obj) {
+        if (obj == workpiece) continue;
+        const scene::SceneObject& obstacle = Object(world, obj);
+        const geometry::DistanceResult d =
+            geometry::ShapeDistance(shapes[b], world_T_box, obstacle.shape, obstacle.world_T_object, 0.05);
+        const double distance = d.intersecting ? 0.0 : d.distance;
+        if (distance < report.min_gripper_clearance_m) {
+          report.min_gripper_clearance_m = distance;
+          std::snprintf(text, sizeof text, "the %s %s %.1f mm %s %s at %s, the tool at %s", boxes[b].name.c_str(),
+                        d.intersecting ? "overlaps" : "comes", distance * 1e3, d.intersecting ? "into" : "from",
+                        obstacle.name.c_str(), sample.what.c_str(), Mm(sample.world_T_tool.translation).c_str());
+          report.closest = text;
+          if (distance < o.gripper_clearance_m && gripper_problem.empty()) {
+            gripper_problem = report.closest + " (the gripper must keep " +
+                              json::FormatNumber(o.gripper_clearance_m * 1e3) + " mm)";
+          }
+        }
+      }
+    }
+  }
+  if (report.problem.empty()) report.problem = gripper_problem;
+  if (report.problem.empty()) report.problem = singular_problem;
+  report.feasible = report.problem.empty();
+  return report;
+}
+
 namespace {
 
 sim::WorkpiecePath ToPath(const sim::WorkpiecePath& like, const std::vector<geometry::Pose3>& poses) {
@@ -548,8 +695,10 @@ sim::WorkpiecePath ToPath(const sim::WorkpiecePath& like, const std::vector<geom
 
 }  // namespace
 
-Result<PlanResult> GenerateProgram(const scene::Scene& scene, const sim::WorkpiecePath& path, const PlanOptions& options) {
+Result<PlanResult> GenerateProgram(const scene::Scene& scene, const sim::WorkpiecePath& path, const PlanOptions& options,
+                                   const robot::RobotModel* robot) {
   TEACHSIM_RETURN_IF_ERROR(options.Validate());
+  if (robot && !scene.robot) return Status::InvalidInput("the scene places no robot (its \"robot\" entry) to plan for");
   const auto start = std::chrono::steady_clock::now();
   sim::SimOptions sim_options;
   sim_options.settle_force_n = 0.0;  // the band floats: only its own forces move it
@@ -640,9 +789,47 @@ Result<PlanResult> GenerateProgram(const scene::Scene& scene, const sim::Workpie
     }
   }
 
-  auto program = MakeProgram(world, *band, knots, options);
-  if (!program.ok()) return program.status();
-  result.program = std::move(program).value();
+  if (!robot) {
+    auto program = MakeProgram(world, *band, knots, options);
+    if (!program.ok()) return program.status();
+    result.program = std::move(program).value();
+  } else {
+    // The grasp (paper §6.2 leaves it to the programmer): from above, turned about the tool axis;
+    // the feasible candidate farthest from the singularities (relative to the required margins).
+    const geometry::Pose3& world_T_base = scene.robot->world_T_base;
+    double best_score = -kInf;
+    for (int k = 0; k < 4; ++k) {
+      const double yaw = k * M_PI / 2;
+      auto program = MakeProgram(world, *band, knots, options, yaw);
+      if (!program.ok()) return program.status();  // the contacts' bias: the same for every grasp
+      GraspReport report = CheckWithRobot(world, *robot, world_T_base, *program, options);
+      report.yaw_deg = k * 90.0;
+      report.width_m = std::get<robot::GraspCommand>(program->commands.front()).width_m;
+      if (report.feasible) {
+        const double score = std::min({report.min_wrist_measure / options.min_wrist_measure,
+                                       report.min_elbow_measure / options.min_elbow_measure,
+                                       report.min_shoulder_m / options.min_shoulder_m});
+        if (score > best_score) {
+          best_score = score;
+          result.program = std::move(program).value();
+          m.robot_checked = true;
+          m.grasp_yaw_deg = report.yaw_deg;
+          m.min_gripper_clearance_m = report.min_gripper_clearance_m;
+          m.min_wrist_measure = report.min_wrist_measure;
+          m.min_elbow_measure = report.min_elbow_measure;
+          m.min_shoulder_m = report.min_shoulder_m;
+        }
+      }
+      result.grasps.push_back(std::move(report));
+    }
+    if (!m.robot_checked) {
+      std::string why = "no grasp of '" + path.workpiece + "' lets " + robot->name + " run the program:";
+      for (const GraspReport& g : result.grasps) {
+        why += "\n  grasp turned " + json::FormatNumber(g.yaw_deg) + " deg: " + g.problem;
+      }
+      return Status::Failed(why);
+    }
+  }
   m.commands = static_cast<int>(result.program.commands.size());
   for (const robot::Command& c : result.program.commands) {
     if (std::holds_alternative<robot::MoveCommand>(c) || std::holds_alternative<robot::ContactMoveCommand>(c)) {

@@ -53,6 +53,17 @@ Status CheckStructure(const RobotModel& m) {
 
 }  // namespace
 
+std::vector<GripperBox> GripperBoxes(const GripperSpec& g, double width_m) {
+  const Eigen::Vector3d& f = g.finger_size_m;
+  std::vector<GripperBox> boxes;
+  boxes.push_back({"palm", g.palm_size_m, geometry::Pose3::Translation(Eigen::Vector3d(0, 0, -f.z() - g.palm_size_m.z() / 2))});
+  for (double side : {1.0, -1.0}) {
+    boxes.push_back({side > 0 ? "finger_left" : "finger_right", f,
+                     geometry::Pose3::Translation(Eigen::Vector3d(0, side * (width_m / 2 + f.y() / 2), -f.z() / 2))});
+  }
+  return boxes;
+}
+
 Joints RobotModel::LowerLimits() const {
   Joints v;
   for (int i = 0; i < kNumJoints; ++i) v[i] = joints[i].lower_rad;
@@ -108,6 +119,28 @@ Status RobotModel::Validate() const {
                                 json::FormatNumber(gripper.min_width_m) + " and " +
                                 json::FormatNumber(gripper.max_width_m));
   }
+  for (int k = 0; k < 3; ++k) {
+    if (!(std::isfinite(gripper.finger_size_m[k]) && gripper.finger_size_m[k] > 0)) {
+      return Status::InvalidInput("gripper.finger_size_m[" + std::to_string(k) + "]: must be > 0, got " +
+                                  json::FormatNumber(gripper.finger_size_m[k]));
+    }
+    if (!(std::isfinite(gripper.palm_size_m[k]) && gripper.palm_size_m[k] > 0)) {
+      return Status::InvalidInput("gripper.palm_size_m[" + std::to_string(k) + "]: must be > 0, got " +
+                                  json::FormatNumber(gripper.palm_size_m[k]));
+    }
+  }
+  if (!(gripper.pad_length_m > 0 && gripper.pad_length_m <= gripper.finger_size_m.z())) {
+    return Status::InvalidInput("gripper.pad_length_m: must be in (0, finger_size_m[2] = " +
+                                json::FormatNumber(gripper.finger_size_m.z()) + "], got " +
+                                json::FormatNumber(gripper.pad_length_m));
+  }
+  // Fingers and palm hang between the tool origin and the flange.
+  if (gripper.finger_size_m.z() + gripper.palm_size_m.z() > flange_T_tool.translation.norm() + 1e-9) {
+    return Status::InvalidInput("gripper.palm_size_m[2]: palm (" + json::FormatNumber(gripper.palm_size_m.z()) +
+                                " m) and fingers (" + json::FormatNumber(gripper.finger_size_m.z()) +
+                                " m) reach beyond the flange, " + json::FormatNumber(flange_T_tool.translation.norm()) +
+                                " m from the tool origin");
+  }
   if (!WithinLimits(ready_rad)) return Status::InvalidInput("ready_rad: must lie within the joint limits");
   return Status::Ok();
 }
@@ -142,9 +175,19 @@ Result<RobotModel> ParseRobotModel(const json::Json& document, const std::string
     }
     m.flange_T_tool = geometry::ReadPose(r.At("flange_T_tool"));
     json::Reader g = r.At("gripper");
-    g.RejectUnknownKeys({"min_width_m", "max_width_m"});
+    g.RejectUnknownKeys({"min_width_m", "max_width_m", "finger_size_m", "pad_length_m", "palm_size_m"});
     m.gripper.min_width_m = g.At("min_width_m").NumberAtLeast(0);
     m.gripper.max_width_m = g.At("max_width_m").NumberGreaterThan(m.gripper.min_width_m);
+    auto positive_size = [](const json::Reader& v) {
+      const Eigen::Vector3d size = v.Vector3();
+      for (int k = 0; k < 3; ++k) {
+        if (!(size[k] > 0)) v.Index(static_cast<std::size_t>(k)).Fail("must be > 0");
+      }
+      return size;
+    };
+    m.gripper.finger_size_m = positive_size(g.At("finger_size_m"));
+    m.gripper.palm_size_m = positive_size(g.At("palm_size_m"));
+    m.gripper.pad_length_m = g.At("pad_length_m").NumberInRange(1e-6, m.gripper.finger_size_m.z());
     json::Reader ready = r.At("ready_rad");
     ready.ExpectSize(kNumJoints);
     for (int i = 0; i < kNumJoints; ++i) m.ready_rad[i] = ready.Index(i).Number();
@@ -179,7 +222,12 @@ json::Json RobotModelToJson(const RobotModel& m) {
           {"dh_convention", "modified"},
           {"joints", joints},
           {"flange_T_tool", geometry::WritePose(m.flange_T_tool)},
-          {"gripper", {{"min_width_m", m.gripper.min_width_m}, {"max_width_m", m.gripper.max_width_m}}},
+          {"gripper",
+           {{"min_width_m", m.gripper.min_width_m},
+            {"max_width_m", m.gripper.max_width_m},
+            {"finger_size_m", {m.gripper.finger_size_m.x(), m.gripper.finger_size_m.y(), m.gripper.finger_size_m.z()}},
+            {"pad_length_m", m.gripper.pad_length_m},
+            {"palm_size_m", {m.gripper.palm_size_m.x(), m.gripper.palm_size_m.y(), m.gripper.palm_size_m.z()}}}},
           {"ready_rad", ready}};
 }
 

@@ -1,5 +1,7 @@
 #include "teachsim/sim/demos.h"
 
+#include <cmath>
+#include <optional>
 #include <random>
 
 namespace teachsim::sim {
@@ -52,18 +54,32 @@ Result<DragScript> AroundCornerScript(const scene::Scene& scene) {
   DragScript script;
   script.workpiece = "plate";
   // Capture on for the stretch along the frame (Figure 12 bottom): from when the plate meets the
-  // east wall to the end; the approach before it is free motion.
-  script.capture = {{"frame", 1.5, 1e300}, {"table", 1.5, 1e300}};
+  // east wall (squared to it as it arrives) to the end; the approach before it is free motion.
+  script.capture = {{"frame", 1.8, 1e300}, {"table", 1.8, 1e300}};
   const Eigen::Vector3d start = plate.world_T_object.translation;
   const double z = start.z();
-  const double half = 0.03;     // the plate's half side
-  const double press = 0.008;   // the dragger runs 8 mm inside the frame: about 0.8 N of contact force
+  const double half = 0.03;    // the plate's half side
+  const double press = 0.008;  // the dragger runs 8 mm inside the frame: about 0.8 N of contact force
+  const Eigen::Vector3d corner(0.12, -0.10, z);  // the frame's south-east outside corner
+  auto yaw = [](double deg) {
+    return std::optional<Eigen::Quaterniond>(Eigen::AngleAxisd(deg * M_PI / 180, Eigen::Vector3d::UnitZ()));
+  };
+  // Around the corner the plate pivots -90 degrees about the corner's edge, its north-west corner
+  // on it, as a person turns a part around a post. A plate slid around the corner without turning
+  // cannot be held by any robot: the jaws that grip it along the east wall close across the south
+  // wall afterwards (a finger would be inside the wall), and jaws turned the other way put the palm
+  // over the east wall. Turned with the plate, the jaws stay parallel to the wall they slide along.
+  // Half way round: the plate centre straight below the corner edge (corner + R(-45 deg) (half, -half)),
+  // the dragger pressed into both walls' directions.
+  const Eigen::Vector3d halfway =
+      corner + Eigen::Vector3d(0, -half * std::sqrt(2.0), 0) + press * Eigen::Vector3d(-1, 1, 0).normalized();
   script.keyframes = {
       {0.0, start, std::nullopt},
-      {2.0, Eigen::Vector3d(0.12 + half - press, -0.05, z), std::nullopt},       // to the east wall
-      {5.0, Eigen::Vector3d(0.12 + half - press, -0.16, z), std::nullopt},       // south along it, past the corner
-      {8.0, Eigen::Vector3d(0.08, -0.1 - half + press, z), std::nullopt},        // around the south-east corner
-      {10.0, Eigen::Vector3d(0.0, -0.1 - half + press, z), std::nullopt},        // west along the south wall
+      {2.0, Eigen::Vector3d(0.12 + half - press, -0.05, z), yaw(0)},              // to the east wall, square to it
+      {5.0, Eigen::Vector3d(0.12 + half - press, -0.10 - half, z), yaw(0)},       // south along it, to the corner
+      {6.5, halfway, yaw(-45)},                                                   // pivoting about the corner edge
+      {8.0, Eigen::Vector3d(0.12 - half, -0.1 - half + press, z), yaw(-90)},      // on the south wall
+      {10.0, Eigen::Vector3d(0.0, -0.1 - half + press, z), yaw(-90)},             // west along the south wall
   };
   script.settle_s = 2.0;
   return script;

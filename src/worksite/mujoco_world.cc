@@ -30,10 +30,6 @@ struct MjHandles {
 
 namespace {
 
-constexpr double kFingerThickness = 0.004;  // half of each finger's pad thickness is 4 mm
-constexpr double kFingerLength = 0.0125;    // half: the pads reach 25 mm back from the tool origin
-constexpr double kFingerDepth = 0.008;      // half: 16 mm wide pads
-
 std::string Num(double v) { return json::FormatNumber(std::abs(v) < 1e-15 ? 0.0 : v); }
 std::string Vec(const Eigen::Vector3d& v) { return Num(v.x()) + " " + Num(v.y()) + " " + Num(v.z()); }
 std::string Quat(const Eigen::Quaterniond& q) {
@@ -282,28 +278,39 @@ Result<std::string> BuildMjcf(const scene::Scene& scene, const robot::RobotModel
     }
     indent += "  ";
   }
-  // The gripper hangs from the flange through the wrist sensor's site.
+  // The gripper hangs from the flange through the wrist sensor's site; its boxes come from the
+  // robot table (robot::GripperSpec), the same the program generator checks against the scene.
   const geometry::Pose3& F_T_tool = model.flange_T_tool;
-  const double pads_back = 2 * kFingerLength;  // the pads reach this far back from the tool origin
-  const double palm_length = std::max(0.01, F_T_tool.translation.norm() - pads_back);
+  const robot::GripperSpec& g = model.gripper;
+  const robot::GripperBox palm = robot::GripperBoxes(g, 0.0).front();
   arm << indent << "<body name=\"gripper\" pos=\"0 0 0\">\n";
   arm << indent << "  <site name=\"wrist\" pos=\"0 0 0\"/>\n";
   arm << indent << "  <site name=\"tool\" " << PoseAttrs(F_T_tool) << "/>\n";
-  arm << indent << "  <geom name=\"palm\" type=\"box\" size=\"0.015 "
-      << Num(model.gripper.max_width_m / 2 + 0.012) << " " << Num(palm_length / 2) << "\" pos=\"0 0 "
-      << Num(palm_length / 2) << "\" mass=\"0.4\" rgba=\"0.3 0.3 0.3 1\"/>\n";
+  arm << indent << "  <geom name=\"palm\" type=\"box\" size=\"" << Vec(palm.size_m / 2) << "\" "
+      << PoseAttrs(F_T_tool * palm.tool_T_box) << " mass=\"0.4\" rgba=\"0.3 0.3 0.3 1\"/>\n";
+  const Eigen::Vector3d half = g.finger_size_m / 2;
+  const double bare_length = g.finger_size_m.z() - g.pad_length_m;  // finger above its pad
   for (int side = 0; side < 2; ++side) {
     const double s = side == 0 ? 1.0 : -1.0;
     const std::string name = side == 0 ? "finger_left" : "finger_right";
+    // The finger body sits at the tool frame; its slide joint is the half width, so the inner
+    // face of the finger is at y = +-width / 2.
     arm << indent << "  <body name=\"" << name << "\" " << PoseAttrs(F_T_tool) << ">\n";
     arm << indent << "    <joint name=\"" << name << "\" type=\"slide\" axis=\"0 " << Num(s)
-        << " 0\" range=\"0 " << Num(model.gripper.max_width_m / 2) << "\" limited=\"true\" damping=\""
+        << " 0\" range=\"0 " << Num(g.max_width_m / 2) << "\" limited=\"true\" damping=\""
         << Num(options.finger_damping_ns_per_m) << "\"/>\n";
-    arm << indent << "    <geom name=\"" << name << "_pad\" type=\"box\" size=\"" << Num(kFingerDepth) << " "
-        << Num(kFingerThickness) << " " << Num(kFingerLength) << "\" pos=\"0 " << Num(s * kFingerThickness)
-        << " " << Num(-kFingerLength) << "\" mass=\"0.03\" condim=\"4\" solmix=\"1000\" solref=\""
-        << Num(options.pad_timeconst_s) << " 1\" friction=\"" << Num(options.finger_friction)
-        << " 0.02 0.0001\" rgba=\"0.2 0.2 0.2 1\"/>\n";
+    const double pad_mass = 0.03 * g.pad_length_m / g.finger_size_m.z();
+    arm << indent << "    <geom name=\"" << name << "_pad\" type=\"box\" size=\"" << Num(half.x()) << " "
+        << Num(half.y()) << " " << Num(g.pad_length_m / 2) << "\" pos=\"0 " << Num(s * half.y()) << " "
+        << Num(-g.pad_length_m / 2) << "\" mass=\"" << Num(pad_mass)
+        << "\" condim=\"4\" solmix=\"1000\" solref=\"" << Num(options.pad_timeconst_s)
+        << " 1\" friction=\"" << Num(options.finger_friction) << " 0.02 0.0001\" rgba=\"0.2 0.2 0.2 1\"/>\n";
+    if (bare_length > 1e-6) {
+      arm << indent << "    <geom name=\"" << name << "_bare\" type=\"box\" size=\"" << Num(half.x()) << " "
+          << Num(half.y()) << " " << Num(bare_length / 2) << "\" pos=\"0 " << Num(s * half.y()) << " "
+          << Num(-g.pad_length_m - bare_length / 2) << "\" mass=\"" << Num(0.03 - pad_mass)
+          << "\" rgba=\"0.3 0.3 0.3 1\"/>\n";
+    }
     arm << indent << "  </body>\n";
   }
   arm << indent << "</body>\n";

@@ -4,6 +4,10 @@
 
 #include <functional>
 
+#include "teachsim/geometry/toi.h"
+#include "teachsim/robot/controller.h"
+#include "teachsim/robot/kinematics.h"
+#include "teachsim/robot/safety.h"
 #include "teachsim/sim/demos.h"
 
 namespace teachsim::plan {
@@ -180,6 +184,130 @@ TEST(Planner, TightFitIsAClearError) {
   ASSERT_FALSE(result.ok());
   EXPECT_EQ(result.status().code(), StatusCode::kFailed);
   EXPECT_NE(result.status().message().find("tight fit"), std::string::npos) << result.status().message();
+}
+
+robot::RobotModel Arm() { return robot::LoadRobotModel(std::string(TEACHSIM_SOURCE_DIR) + "/robots/crs_a465.json").value(); }
+
+// The smallest distance from the gripper's palm and fingers to the scene (the workpiece aside) along
+// a program's motions, sampled every 1 mm here, independently of the planner's own sampling.
+double GripperClearance(const scene::Scene& scene, const robot::RobotModel& model, const robot::Program& program,
+                        std::string* where) {
+  double best = 1e300;
+  const int workpiece = scene.FindObject(program.workpiece);
+  geometry::Pose3 pose = geometry::Pose3::Identity();  // set by the grasp, the first command
+  double width = model.gripper.max_width_m;
+  auto check = [&](const geometry::Pose3& tool, const std::string& what) {
+    for (const robot::GripperBox& b : robot::GripperBoxes(model.gripper, width)) {
+      const geometry::Shape shape = geometry::Shape::Single(geometry::ConvexPolyhedron::Box(b.size_m).value());
+      for (int o = 0; o < static_cast<int>(scene.objects.size()); ++o) {
+        if (o == workpiece) continue;
+        const auto d = geometry::ShapeDistance(shape, tool * b.tool_T_box, scene.objects[static_cast<std::size_t>(o)].shape,
+                                               scene.objects[static_cast<std::size_t>(o)].world_T_object);
+        const double distance = d.intersecting ? 0.0 : d.distance;
+        if (distance < best) {
+          best = distance;
+          *where = b.name + " to " + scene.objects[static_cast<std::size_t>(o)].name + " in " + what;
+        }
+      }
+    }
+  };
+  auto line = [&](const geometry::Pose3& goal, const std::string& what) {
+    const int n = std::max(1, static_cast<int>((goal.translation - pose.translation).norm() / 1e-3));
+    for (int k = 1; k <= n; ++k) check(geometry::Interpolate(pose, goal, static_cast<double>(k) / n), what);
+    pose = goal;
+  };
+  for (const robot::Command& c : program.commands) {
+    if (const auto* g = std::get_if<robot::GraspCommand>(&c)) {
+      width = g->open_width_m;
+      pose = g->ApproachPose();
+      check(pose, "grasp");
+      line(g->world_T_tool, "grasp");
+      width = g->width_m;
+    } else if (const auto* m = std::get_if<robot::MoveCommand>(&c)) {
+      line(m->world_T_tool, "move");
+    } else if (const auto* cm = std::get_if<robot::ContactMoveCommand>(&c)) {
+      line(cm->world_T_tool, "contact move");
+    } else if (const auto* r = std::get_if<robot::ReleaseCommand>(&c)) {
+      width = r->width_m;
+      check(pose, "release");
+    } else if (const auto* t = std::get_if<robot::RetreatCommand>(&c)) {
+      geometry::Pose3 up = pose;
+      up.translation.z() += t->distance_m;
+      line(up, "retreat");
+    }
+  }
+  return best;
+}
+
+// With the robot, the programs of both demonstrations keep the gripper (palm, fingers) at least
+// the planner's clearance from the scene all along, pass the work site's safety checks, and stay
+// away from the singularities; cornering's grasp leaves the post and lip alone.
+TEST(Planner, WithTheRobotTheGripperClearsTheSceneOnBothDemoPaths) {
+  const robot::RobotModel arm = Arm();
+  const std::vector<std::pair<const char*, std::function<Result<sim::DragScript>(const scene::Scene&)>>> demos = {
+      {"cornering", [](const scene::Scene& s) { return sim::CorneringScript(s, {}); }},
+      {"around-corner", [](const scene::Scene& s) { return sim::AroundCornerScript(s); }}};
+  for (const auto& [name, script] : demos) {
+    Demo d = Demonstrate(script);
+    auto result = GenerateProgram(d.scene, d.path, {}, &arm);
+    ASSERT_TRUE(result.ok()) << name << ": " << result.status().message();
+    const PlanMetrics& m = result->metrics;
+    ASSERT_TRUE(m.robot_checked);
+    ASSERT_EQ(result->grasps.size(), 4u);
+    for (const GraspReport& g : result->grasps) {
+      std::printf("%s: grasp %3.0f deg: %s; gripper %.1f mm (%s); wrist %.3f\n", name, g.yaw_deg,
+                  g.feasible ? "feasible" : g.problem.c_str(), g.min_gripper_clearance_m * 1e3, g.closest.c_str(),
+                  g.min_wrist_measure);
+    }
+    std::string where;
+    const double clearance = GripperClearance(d.scene, arm, result->program, &where);
+    EXPECT_GE(clearance, PlanOptions{}.gripper_clearance_m - 1e-4) << name << ": " << where;
+    EXPECT_GE(m.min_wrist_measure, PlanOptions{}.min_wrist_measure) << name;
+    const robot::ControllerOptions controller;
+    const Status safe = robot::CheckProgram(arm, d.scene.robot->world_T_base, result->program, arm.ready_rad,
+                                            controller.limits, controller.safety);
+    EXPECT_TRUE(safe.ok()) << name << ": " << safe.message();
+    // The grasp turned 90 degrees puts a finger through the cornering post or the palm over a wall:
+    // refused, with the place named.
+    if (std::string(name) == "cornering") {
+      EXPECT_FALSE(result->grasps[1].feasible);
+      EXPECT_FALSE(result->grasps[3].feasible);
+      EXPECT_NE(result->grasps[3].problem.find("frame"), std::string::npos) << result->grasps[3].problem;
+    }
+  }
+}
+
+// The plate slid around the corner without turning (the first around-the-corner script): after the
+// corner, jaws that held it along the east wall would close across the south wall, and jaws turned
+// the other way put the palm over the east wall. No grasp can run it; the error says where.
+TEST(Planner, AProgramNoGraspCanRunIsRefusedNamingThePlace) {
+  const robot::RobotModel arm = Arm();
+  Demo d = Demonstrate([](const scene::Scene& s) -> Result<sim::DragScript> {
+    sim::DragScript script;
+    script.workpiece = "plate";
+    script.capture = {{"frame", 1.5, 1e300}, {"table", 1.5, 1e300}};
+    const Eigen::Vector3d start = s.objects[static_cast<std::size_t>(s.FindObject("plate"))].world_T_object.translation;
+    const double z = start.z();
+    script.keyframes = {{0.0, start, std::nullopt},
+                        {2.0, Eigen::Vector3d(0.142, -0.05, z), std::nullopt},
+                        {5.0, Eigen::Vector3d(0.142, -0.16, z), std::nullopt},
+                        {8.0, Eigen::Vector3d(0.08, -0.122, z), std::nullopt},
+                        {10.0, Eigen::Vector3d(0.0, -0.122, z), std::nullopt}};
+    return script;
+  });
+  auto result = GenerateProgram(d.scene, d.path, {}, &arm);
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.status().code(), StatusCode::kFailed);
+  const std::string& message = result.status().message();
+  std::printf("%s\n", message.c_str());
+  EXPECT_NE(message.find("no grasp of 'plate'"), std::string::npos) << message;
+  for (const char* yaw : {"grasp turned 0 deg", "grasp turned 90 deg", "grasp turned 180 deg", "grasp turned 270 deg"}) {
+    EXPECT_NE(message.find(yaw), std::string::npos) << message;
+  }
+  EXPECT_NE(message.find("frame"), std::string::npos) << message;
+  EXPECT_NE(message.find("commands["), std::string::npos) << message;
+  // Without the robot the same path still gives a program (the old, unchecked behaviour).
+  EXPECT_TRUE(GenerateProgram(d.scene, d.path).ok());
 }
 
 TEST(Planner, BadInputIsNamed) {

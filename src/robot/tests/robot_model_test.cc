@@ -42,6 +42,16 @@ TEST(RobotModel, LoadsTheCrsA465Table) {
   EXPECT_GT(m->flange_T_tool.translation.z(), 0.05);  // the gripper reaches beyond the flange
   EXPECT_LT(m->gripper.min_width_m, 0.045);           // closes on a 45 mm block
   EXPECT_GT(m->gripper.max_width_m, 0.060);           // opens wider than a 60 mm block
+  // The gripper's boxes: the palm's underside 25 mm above the fingertips (the tool origin), the
+  // fingers' inner faces at +-width / 2, everything between the tool origin and the flange.
+  const std::vector<GripperBox> boxes = GripperBoxes(m->gripper, 0.06);
+  ASSERT_EQ(boxes.size(), 3u);
+  EXPECT_EQ(boxes[0].name, "palm");
+  EXPECT_NEAR(boxes[0].tool_T_box.translation.z() + boxes[0].size_m.z() / 2, -0.025, 1e-12);
+  EXPECT_NEAR(boxes[0].tool_T_box.translation.z() - boxes[0].size_m.z() / 2, -0.13, 1e-12);
+  EXPECT_NEAR(boxes[1].tool_T_box.translation.y() - boxes[1].size_m.y() / 2, 0.03, 1e-12);
+  EXPECT_NEAR(boxes[2].tool_T_box.translation.y() + boxes[2].size_m.y() / 2, -0.03, 1e-12);
+  EXPECT_NEAR(boxes[1].tool_T_box.translation.z() + boxes[1].size_m.z() / 2, 0.0, 1e-12);
   for (const DhJoint& j : m->joints) {
     EXPECT_LT(j.lower_rad, 0);
     EXPECT_GT(j.upper_rad, 0);
@@ -67,6 +77,11 @@ TEST(RobotModel, ValidationErrorsNameFileAndJsonPath) {
       {"/joints/3/max_speed_rad_s", 0.0, "joints[3].max_speed_rad_s: must be > 0"},
       {"/joints/0/a_m", "zero", "joints[0].a_m: must be a number, got string"},
       {"/gripper/max_width_m", -0.01, "gripper.max_width_m: must be > 0"},
+      {"/gripper/finger_size_m/1", 0.0, "gripper.finger_size_m[1]: must be > 0"},
+      {"/gripper/palm_size_m", json::Json::array({0.03, 0.1}), "gripper.palm_size_m: must have 3 elements"},
+      {"/gripper/pad_length_m", 0.03, "gripper.pad_length_m: must be"},
+      {"/gripper/palm_size_m/2", 0.2, "gripper.palm_size_m[2]: palm (0.2 m) and fingers (0.025 m) reach beyond the flange"},
+      {"/gripper/pads", 1.0, "gripper: unknown field 'pads'"},
       {"/flange_T_tool/quaternion_wxyz", json::Json::array({0, 0, 0, 2}),
        "flange_T_tool.quaternion_wxyz: must be a unit"},
       {"/ready_rad/1", 3.0, "ready_rad: must lie within the joint limits"},

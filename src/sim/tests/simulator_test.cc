@@ -107,6 +107,11 @@ TEST(Simulator, AroundTheCornerKeepsCaptureContactWithoutSticking) {
   const Eigen::Vector3d end = summary.final_pose.translation;
   EXPECT_LT(end.x(), 0.05);
   EXPECT_NEAR(end.y(), -0.13, 0.002);
+  // The plate pivoted -90 degrees about the corner's edge (so that a gripper can hold it all the
+  // way: its jaws stay parallel to the wall it slides along), and it lies flat on the table.
+  const Eigen::Matrix3d R = summary.final_pose.RotationMatrix();
+  EXPECT_NEAR(std::atan2(R(1, 0), R(0, 0)) * 180 / M_PI, -90.0, 2.0);
+  EXPECT_GT(R(2, 2), std::cos(0.5 * M_PI / 180));
   EXPECT_EQ(summary.sticking_events, 0);
 }
 

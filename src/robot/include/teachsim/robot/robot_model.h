@@ -4,8 +4,10 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <array>
 #include <string>
+#include <vector>
 
 #include "teachsim/base/json.h"
 #include "teachsim/base/status.h"
@@ -28,10 +30,31 @@ struct DhJoint {
   double max_speed_rad_s = 0;
 };
 
+// The parallel-jaw gripper's opening range and its geometry (boxes, in the tool frame: z out of
+// the gripper, y the closing direction). The MuJoCo work site builds its gripper from these and the
+// program generator checks them against the scene along every program (the palm catching a wall
+// after a corner was what made the first around-the-corner program fail on the work site).
 struct GripperSpec {
   double min_width_m = 0;  // parallel jaws: distance between the finger pads
   double max_width_m = 0;
+  // Each finger: depth (x) x thickness (y) x length (z); its inner face at y = +-width / 2, its tip
+  // at the tool origin, reaching back toward the flange.
+  Eigen::Vector3d finger_size_m = Eigen::Vector3d(0.016, 0.008, 0.025);
+  // The finger's lower pad_length_m is its rubber pad (soft, high friction); above it, bare finger.
+  double pad_length_m = 0.025;
+  // The palm: centred on the tool z axis, its underside on the fingers' tops (z = -finger length),
+  // reaching toward the flange.
+  Eigen::Vector3d palm_size_m = Eigen::Vector3d(0.03, 0.104, 0.105);
 };
+
+// One box of the gripper, placed in the tool frame.
+struct GripperBox {
+  std::string name;  // "palm", "finger_left" (+y), "finger_right" (-y)
+  Eigen::Vector3d size_m;
+  geometry::Pose3 tool_T_box;
+};
+// The palm and both fingers (pads included) with the jaws `width_m` apart.
+std::vector<GripperBox> GripperBoxes(const GripperSpec& gripper, double width_m);
 
 struct RobotModel {
   std::string name;
