@@ -10,6 +10,7 @@
 #include <future>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -249,7 +250,8 @@ struct OperatorService::Impl {
       if (loaded.ok()) {
         robot_table = std::move(loaded).value();
       } else {
-        std::fprintf(stderr, "operator: no whole-arm view: %s\n", loaded.status().message().c_str());
+        std::fprintf(stderr, "operator: no robot table (no whole-arm view, grasps not checked against the arm): %s\n",
+                     loaded.status().message().c_str());
       }
     }
     return robot_table ? &*robot_table : nullptr;
@@ -532,9 +534,14 @@ struct OperatorService::Impl {
     program.reset();
     if (planner_thread.joinable()) planner_thread.join();
     const std::size_t nodes = path.nodes.size();
-    planner_thread = std::thread([this, start = std::move(start), path = std::move(path)] {
+    // With the robot's table the planner chooses a grasp the arm can follow and keeps the gripper clear of
+    // the scene; the thread gets its own copy (the table may be reloaded while it plans).
+    std::optional<robot::RobotModel> arm;
+    if (const robot::RobotModel* table = RobotTable()) arm = *table;
+    planner_thread = std::thread([this, start = std::move(start), path = std::move(path), arm = std::move(arm)] {
       auto t0 = WallClock::now();
-      auto planned = std::make_shared<Result<plan::PlanResult>>(plan::GenerateProgram(start, path, options.plan));
+      auto planned = std::make_shared<Result<plan::PlanResult>>(
+          plan::GenerateProgram(start, path, options.plan, arm ? &*arm : nullptr));
       const double ms = Seconds(WallClock::now() - t0) * 1e3;
       Post([this, planned, ms] { Planned(*planned, ms); });
     });
