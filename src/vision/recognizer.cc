@@ -564,6 +564,7 @@ Support EdgeSupport(const Model& model, const Camera& camera, const geometry::Po
 }
 
 struct Candidate {
+  int trace_index = -1;  // into RecognitionTrace::fitted
   int model = 0;
   geometry::Pose3 camera_T_object;
   FitResult fit;
@@ -659,8 +660,102 @@ PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geomet
   return out;
 }
 
+const char* LossStageName(LossStage stage) {
+  switch (stage) {
+    case LossStage::kSegments: return "segments";
+    case LossStage::kGroups: return "groups";
+    case LossStage::kHypotheses: return "hypotheses";
+    case LossStage::kFit: return "fit";
+    case LossStage::kVerification: return "verification";
+    case LossStage::kSelection: return "selection";
+    case LossStage::kAccepted: return "accepted";
+  }
+  return "?";
+}
+
+StageLoss ClassifyLoss(const Model& model, int model_index, const Camera& camera, const geometry::Pose3& camera_T_truth,
+                       const LineDetection& detection, const std::vector<Group>& groups,
+                       const RecognitionTrace& trace) {
+  StageLoss out;
+  const Eigen::Matrix3d K = camera.K();
+  constexpr double kNearPx = 3, kNearAngle = 5 * M_PI / 180;
+  const EdgeMatchSet set = MatchEdges(model, K, camera_T_truth, detection.lines, kNearPx, kNearAngle);
+  const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_truth.Inverse().translation);
+  std::set<int> edges;
+  for (const LineMatch& m : set.matches) edges.insert(m.edge);
+  for (int e = 0; e < 12; ++e) out.visible_edges += visible >> e & 1;
+  out.edges_with_lines = static_cast<int>(edges.size());
+  if (out.edges_with_lines < 3) return out;
+  out.stage = LossStage::kGroups;
+  const std::set<int> own(set.segments.begin(), set.segments.end());
+  bool grouped = false;
+  for (const Group& g : groups) {
+    bool all = true;
+    for (int s = 0; s < GroupSegments(g.kind); ++s) all = all && own.count(g.segments[static_cast<size_t>(s)]) > 0;
+    grouped = grouped || all;
+  }
+  if (!grouped) return out;
+  out.stage = LossStage::kHypotheses;
+  // Distance between two poses as the mean distance of each projected vertex to the nearest
+  // projected vertex of the other (invariant to the box's symmetries), px.
+  Eigen::Vector2d truth_px[8];
+  double extent = 0;
+  for (int i = 0; i < 8; ++i) {
+    truth_px[i] = (K * (camera_T_truth * BoxVertex(model.box_size_m, i))).hnormalized();
+    for (int j = 0; j < i; ++j) extent = std::max(extent, (truth_px[i] - truth_px[j]).norm());
+  }
+  auto distance = [&](const geometry::Pose3& pose) {
+    double sum = 0;
+    Eigen::Vector2d px[8];
+    for (int i = 0; i < 8; ++i) {
+      const Eigen::Vector3d p = pose * BoxVertex(model.box_size_m, i);
+      if (p.z() <= 1e-3) return 1e9;
+      px[i] = (K * p).hnormalized();
+    }
+    for (int i = 0; i < 8; ++i) {
+      double best = 1e9;
+      for (int j = 0; j < 8; ++j) best = std::min(best, (truth_px[i] - px[j]).norm());
+      sum += best;
+    }
+    return sum / 8;
+  };
+  out.extent_px = extent;
+  const double start_px = std::max(8.0, 0.25 * extent);
+  constexpr double kConvergedPx = 3;
+  bool started = false, converged = false, candidate = false;
+  for (const RecognitionTrace::Fitted& f : trace.fitted) {
+    if (f.model != model_index) continue;
+    const double end_px = distance(f.camera_T_object);
+    out.best_end_px = std::min(out.best_end_px, end_px);
+    const double start = distance(f.initial_camera_T_object);
+    if (start < out.best_start_px) {
+      out.best_start_px = start;
+      out.best_start_rounds_px.clear();
+      for (const geometry::Pose3& r : f.rounds) out.best_start_rounds_px.push_back(distance(r));
+    }
+    const bool near_end = end_px < kConvergedPx;
+    if (near_end && f.accepted) {
+      out.stage = LossStage::kAccepted;
+      return out;
+    }
+    started = started || distance(f.initial_camera_T_object) < start_px;
+    if (near_end) {
+      converged = true;
+      if (f.outcome == RecognitionTrace::Outcome::kCandidate) {
+        candidate = true;
+      } else if (!candidate) {
+        out.verification = std::max(out.verification, f.outcome);
+      }
+    }
+  }
+  if (candidate) out.stage = LossStage::kSelection;
+  else if (converged) out.stage = LossStage::kVerification;
+  else if (started) out.stage = LossStage::kFit;
+  return out;
+}
+
 Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, const Camera& camera,
-                                                const scene::Scene* fixed_world) const {
+                                                const scene::Scene* fixed_world, RecognitionTrace* trace) const {
   if (image_gray8.empty() || image_gray8.type() != CV_8UC1) {
     return Status::InvalidInput("Recognize: the image must be 8-bit monochrome (CV_8UC1)");
   }
@@ -732,6 +827,11 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
                      [](const Hypothesis& a, const Hypothesis& b) { return a.probability > b.probability; });
   }
   const auto t3 = Clock::now();
+  if (trace != nullptr) {
+    trace->lines = static_cast<int>(lines.size());
+    trace->groups = static_cast<int>(groups.size());
+    trace->hypotheses = static_cast<int>(hypotheses.size());
+  }
 
   // Fixed world: the table top and the other fixed parts.
   double table_top_z = 0;
@@ -787,6 +887,15 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     if (seen) continue;
     tried.push_back({entry.model, initial});
     ++fits;
+    using Outcome = RecognitionTrace::Outcome;
+    RecognitionTrace::Fitted* traced = nullptr;
+    if (trace != nullptr) {
+      trace->fitted.push_back({entry.model, h.kind, initial, initial, {}, Outcome::kFitFailed, false});
+      traced = &trace->fitted.back();
+    }
+    auto reject = [&](Outcome outcome) {
+      if (traced != nullptr) traced->outcome = outcome;
+    };
 
     // The hypothesis' own correspondences first, then predicted edges' matches (Lowe 1991).
     std::vector<LineMatch> matches;
@@ -806,6 +915,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       matches.push_back({edge, l.a, l.b});
     }
     FitResult fit = FitPoseToLines(model.box_size_m, K, initial, matches, 8, options_.huber_px);
+    if (traced != nullptr) traced->rounds.push_back(fit.camera_T_object);
     EdgeMatchSet set;
     bool failed = false;
     for (int round = 0; round < 3; ++round) {
@@ -817,19 +927,31 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       }
       fit = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, set.matches, options_.max_iterations,
                            options_.huber_px);
+      if (traced != nullptr) traced->rounds.push_back(fit.camera_T_object);
     }
+    if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
     if (failed) continue;
     set = MatchEdges(model, K, fit.camera_T_object, lines, options_.match_distance_px, match_angle);
-    if (set.matched_fraction < options_.min_matched_edge_fraction) continue;
+    if (set.matched_fraction < options_.min_matched_edge_fraction) {
+      reject(Outcome::kMatchedFraction);
+      continue;
+    }
     // RMS of the matched segments against the final pose.
     {
       FitResult check = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, set.matches, 0, 0);
       fit.rms_px = check.rms_px;
     }
-    if (fit.rms_px > options_.max_reprojection_rms_px) continue;
+    if (fit.rms_px > options_.max_reprojection_rms_px) {
+      reject(Outcome::kReprojection);
+      continue;
+    }
     const Support support = EdgeSupport(model, camera, fit.camera_T_object, detection.edge_map,
                                         options_.min_edge_contrast);
-    if (support.fraction < options_.min_score || support.coverage < options_.min_coverage) continue;
+    if (support.fraction < options_.min_score || support.coverage < options_.min_coverage) {
+      reject(Outcome::kSupport);
+      continue;
+    }
+    reject(Outcome::kImplausible);
     // Culling (§7.1): outside the work site, under the table, inside a fixed object.
     const geometry::Pose3 world_T_object = world_T_camera * fit.camera_T_object;
     if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m) continue;
@@ -842,7 +964,9 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
                                          std::max(0.005, 0.2 * model.box_size_m.minCoeff());
     }
     if (inside_fixed) continue;
+    reject(Outcome::kCandidate);
     Candidate c;
+    c.trace_index = traced != nullptr ? static_cast<int>(trace->fitted.size()) - 1 : -1;
     c.model = entry.model;
     c.camera_T_object = fit.camera_T_object;
     c.fit = fit;
@@ -929,6 +1053,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   // 6. the model editor's rules (§4.3).
   for (size_t i : accepted) {
     const Candidate& c = candidates[i];
+    if (trace != nullptr && c.trace_index >= 0) trace->fitted[static_cast<size_t>(c.trace_index)].accepted = true;
     const Model& model = models_.models[static_cast<size_t>(c.model)];
     Recognition r;
     r.model = model.name;

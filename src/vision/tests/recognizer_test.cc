@@ -316,6 +316,58 @@ TEST(RecognizerTest, RecognizesRenderedBlocksAndRestsThemOnTheTable) {
   }
 }
 
+// The trace says what became of each fitted hypothesis, and ClassifyLoss puts each true object
+// down to the stage that lost it: a rendered block is accepted; a block that is not in the image
+// has no lines; one drawn as a lone quadrilateral (edges, no junction of three) has no group.
+TEST(RecognizerTest, TheTraceTellsWhichStageLostAnObject) {
+  const Camera camera = SyntheticCamera();
+  auto recognizer = Recognizer::Create({{Cube(), Bar()}}, SmallIndexOptions(), "");
+  ASSERT_TRUE(recognizer.ok());
+  const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0.05, -0.04, -0.3);
+  const cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar_pose}}, 7);
+  RecognitionTrace trace;
+  auto result = recognizer->Recognize(image, camera, nullptr, &trace);
+  ASSERT_TRUE(result.ok());
+  ASSERT_EQ(result->objects.size(), 1u);
+  EXPECT_GT(trace.lines, 6);
+  EXPECT_GT(trace.groups, 0);
+  EXPECT_GE(trace.hypotheses, static_cast<int>(trace.fitted.size()));
+  int accepted = 0;
+  for (const RecognitionTrace::Fitted& f : trace.fitted) {
+    if (!f.accepted) continue;
+    ++accepted;
+    EXPECT_EQ(f.outcome, RecognitionTrace::Outcome::kCandidate);
+    EXPECT_EQ(f.model, 1);
+    EXPECT_FALSE(f.rounds.empty());
+  }
+  EXPECT_EQ(accepted, 1);
+  const LineDetection detection = DetectLinesAndEdges(image, camera, recognizer->options());
+  const std::vector<Group> groups = FindGroups(detection.lines, recognizer->options());
+  const geometry::Pose3 camera_T_bar = camera.camera_T_world() * bar_pose;
+  const StageLoss found = ClassifyLoss(Bar(), 1, camera, camera_T_bar, detection, groups, trace);
+  EXPECT_EQ(found.stage, LossStage::kAccepted) << LossStageName(found.stage);
+  EXPECT_GE(found.edges_with_lines, 6);
+  EXPECT_LT(found.best_end_px, 1.0);
+  // A cube where the image shows only the table.
+  const geometry::Pose3 camera_T_cube = camera.camera_T_world() * OnTable(Cube().box_size_m, -0.08, 0.06, 0.2);
+  EXPECT_EQ(ClassifyLoss(Cube(), 0, camera, camera_T_cube, detection, groups, trace).stage, LossStage::kSegments);
+  // The bar's lines without any group: nothing to index.
+  EXPECT_EQ(ClassifyLoss(Bar(), 1, camera, camera_T_bar, detection, {}, trace).stage, LossStage::kGroups);
+  // Groups but no hypothesis was fitted.
+  EXPECT_EQ(ClassifyLoss(Bar(), 1, camera, camera_T_bar, detection, groups, RecognitionTrace{}).stage,
+            LossStage::kHypotheses);
+  // A fit that started on it and ended elsewhere, and one that ended on it but was rejected.
+  RecognitionTrace wrong;
+  geometry::Pose3 away = camera_T_bar;
+  away.translation.x() += 0.03;
+  wrong.fitted.push_back({1, 0, camera_T_bar, away, {away}, RecognitionTrace::Outcome::kSupport, false});
+  EXPECT_EQ(ClassifyLoss(Bar(), 1, camera, camera_T_bar, detection, groups, wrong).stage, LossStage::kFit);
+  wrong.fitted.push_back({1, 0, camera_T_bar, camera_T_bar, {camera_T_bar}, RecognitionTrace::Outcome::kSupport, false});
+  const StageLoss rejected = ClassifyLoss(Bar(), 1, camera, camera_T_bar, detection, groups, wrong);
+  EXPECT_EQ(rejected.stage, LossStage::kVerification);
+  EXPECT_EQ(rejected.verification, RecognitionTrace::Outcome::kSupport);
+}
+
 TEST(RecognizerTest, RejectsImagesThatDoNotFitTheCamera) {
   auto recognizer = Recognizer::Create({{Cube()}}, SmallIndexOptions(), "");
   ASSERT_TRUE(recognizer.ok());

@@ -8,7 +8,10 @@
 // error, reprojection RMS and time per image (thread CPU time, one OpenCV thread).
 // Environment: TEACHSIM_HOME (repository), TEACHSIM_SHARED (../shared), TEACHSIM_CACHE_DIR
 // (templates and index; default: bench-cache beside the executable, in the build folder);
-// TEACHSIM_RECOGNIZE_DEBUG=1 prints every LINE-MOD match beside the truth.
+// TEACHSIM_RECOGNIZE_DEBUG=1 prints every LINE-MOD match beside the truth (and each object the
+// recognizer missed with the stage that lost it); TEACHSIM_RECOGNIZE_NO_PEER=1 leaves LINE-MOD out
+// (for quick runs while working on the recognizer). For teachsim, every scored object is put down
+// to the stage that lost it (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
 
 #include <algorithm>
@@ -290,6 +293,8 @@ struct DataSetResult {
   vision::SummaryBuilder builders[kMethodCount];
   int errors[kMethodCount] = {0, 0, 0, 0};
   int bins[3] = {0, 0, 0};
+  int losses[3][vision::kLossStages] = {};  // teachsim: per bin, objects by the stage that lost them
+  int losses_found[3][vision::kLossStages] = {};  // ... of them those the evaluation counts as found
 };
 
 vision::Detection FromRecognition(const vision::Recognition& r, bool raw) {
@@ -364,7 +369,8 @@ int Run(const BenchArgs& args) {
       bool failed[kMethodCount] = {false, false, false, false};
 
       double cpu = ThreadCpuMs();
-      auto recognized = recognizer->Recognize(c.image, *camera, &fixed_world);
+      vision::RecognitionTrace trace;
+      auto recognized = recognizer->Recognize(c.image, *camera, &fixed_world, &trace);
       time_ms[0] = time_ms[1] = ThreadCpuMs() - cpu;
       if (recognized.ok()) {
         for (const vision::Recognition& r : recognized->objects) {
@@ -375,8 +381,44 @@ int Run(const BenchArgs& args) {
         failed[0] = failed[1] = true;
       }
 
+      if (recognized.ok()) {  // which stage lost each object (not timed)
+        const vision::LineDetection detection =
+            vision::DetectLinesAndEdges(c.image, *camera, recognizer->options());
+        const std::vector<vision::Group> groups = vision::FindGroups(detection.lines, recognizer->options());
+        auto evaluation = vision::EvaluateImage(c.truth, found[0], truth->model_sizes_m, eye, match);
+        for (std::size_t i = 0; i < c.truth.size(); ++i) {
+          const vision::TruthObject& t = c.truth[i];
+          if (t.visible_fraction < match.min_visible_fraction || t.visible_pixels <= 0) continue;
+          int model_index = 0;
+          while (library.models[static_cast<std::size_t>(model_index)].name != t.model) ++model_index;
+          const vision::StageLoss loss = vision::ClassifyLoss(
+              library.models[static_cast<std::size_t>(model_index)], model_index, *camera,
+              camera->camera_T_world() * t.world_T_object, detection, groups, trace);
+          const int bin = static_cast<int>(vision::BinOf(t.visible_fraction));
+          ++result.losses[bin][static_cast<int>(loss.stage)];
+          bool was_found = false;
+          if (evaluation.ok()) {
+            for (const vision::ObjectOutcome& o : evaluation->objects) {
+              was_found = was_found || (o.truth == static_cast<int>(i) && o.detection >= 0);
+            }
+          }
+          if (was_found) ++result.losses_found[bin][static_cast<int>(loss.stage)];
+          if (std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr && !was_found) {
+            auto p = camera->Project(t.world_T_object.translation);
+            std::fprintf(stderr,
+                         "%s missed %s %.2f at (%.0f, %.0f): %s (%d of %d edges have lines; outcome %d; "
+                         "size %.0f px, closest start %.1f px, end %.1f px)\n",
+                         c.name.c_str(), t.model.c_str(), t.visible_fraction, p ? p->x() : -1, p ? p->y() : -1,
+                         vision::LossStageName(loss.stage), loss.edges_with_lines, loss.visible_edges,
+                         static_cast<int>(loss.verification), loss.extent_px, loss.best_start_px, loss.best_end_px);
+            for (double d : loss.best_start_rounds_px) std::fprintf(stderr, "    round: %.1f px\n", d);
+          }
+        }
+      }
+
+      const bool no_peer = std::getenv("TEACHSIM_RECOGNIZE_NO_PEER") != nullptr;
       cpu = ThreadCpuMs();
-      const std::vector<LinemodDetection> matches = peer->Detect(c.image, *camera);
+      const std::vector<LinemodDetection> matches = no_peer ? std::vector<LinemodDetection>{} : peer->Detect(c.image, *camera);
       time_ms[2] = ThreadCpuMs() - cpu;
       for (const LinemodDetection& m : matches) found[2].push_back(m.detection);
       if (std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr) {
@@ -450,7 +492,17 @@ int Run(const BenchArgs& args) {
       summary["failed_images"] = results[s].errors[m];
       methods[kMethods[m]] = summary;
     }
+    json::Json losses = json::Json::object();
+    for (int b = 0; b < 3; ++b) {
+      json::Json per_stage = json::Json::object();
+      for (int k = 0; k < vision::kLossStages; ++k) {
+        per_stage[vision::LossStageName(static_cast<vision::LossStage>(k))] = {
+            {"objects", results[s].losses[b][k]}, {"found", results[s].losses_found[b][k]}};
+      }
+      losses[vision::BinName(static_cast<vision::VisibilityBin>(b))] = per_stage;
+    }
     data_sets.push_back({{"name", sets[s].name},
+                         {"teachsim_losses", losses},
                          {"description", sets[s].description},
                          {"images", sets[s].cases.size()},
                          {"scored_objects_per_bin",
@@ -519,6 +571,14 @@ int Run(const BenchArgs& args) {
       row(label, [&, k = key](const json::Json& j) {
         return number(j[k]["median"], "%.2f") + " / " + number(j[k]["p90"], "%.2f");
       });
+    }
+    std::printf("  teachsim: objects by the stage that lost them (of them found), per bin\n");
+    for (const char* bin : {">=0.7", "0.4-0.7", "<0.4"}) {
+      std::printf("    %-8s", bin);
+      for (const auto& [stage, n] : set["teachsim_losses"][bin].items()) {
+        std::printf("  %s %d (%d)", stage.c_str(), n["objects"].get<int>(), n["found"].get<int>());
+      }
+      std::printf("\n");
     }
   }
   return 0;

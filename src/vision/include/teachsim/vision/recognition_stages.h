@@ -96,6 +96,32 @@ struct PoseEvidence {
 PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                           const LineDetection& detection, const RecognizerOptions& options);
 
+// ---- measuring: at which stage the recognizer lost a true object (issue 7's "measure first").
+enum class LossStage : uint8_t {
+  kSegments,      // fewer than 3 of its visible edges have an image line along them
+  kGroups,        // no perceptual group made only of its edges
+  kHypotheses,    // no fitted hypothesis of its model started near its pose (index, ranking or cap)
+  kFit,           // hypotheses started near it, none converged onto it
+  kVerification,  // a fit converged onto it and verification or culling rejected it
+  kSelection,     // it was a candidate; non-maximum suppression or the support rule dropped it
+  kAccepted,      // it was recognized (near its true pose)
+};
+inline constexpr int kLossStages = 7;
+const char* LossStageName(LossStage stage);
+struct StageLoss {
+  LossStage stage = LossStage::kSegments;
+  int visible_edges = 0, edges_with_lines = 0;
+  double extent_px = 0;                           // the true pose's projected size
+  double best_start_px = 1e9, best_end_px = 1e9;  // the fitted hypotheses' closest start and end
+  std::vector<double> best_start_rounds_px;       // the closest start's distance after each fit round
+  RecognitionTrace::Outcome verification = RecognitionTrace::Outcome::kFitFailed;  // for kVerification
+};
+// camera_T_truth: the true pose; model_index: its model in the recognizer's library; trace from
+// Recognize on the same image with the same options.
+StageLoss ClassifyLoss(const Model& model, int model_index, const Camera& camera, const geometry::Pose3& camera_T_truth,
+                       const LineDetection& detection, const std::vector<Group>& groups,
+                       const RecognitionTrace& trace);
+
 // ---- item 5/6 helpers: the smallest translation separating two convex sets of vertices with the
 // given candidate axes (separating-axis test). depth <= 0 means they do not overlap.
 struct Penetration {

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <utility>
@@ -109,6 +110,30 @@ std::vector<ImageLine> DetectLines(const cv::Mat& image_gray8, const Camera& cam
 
 struct RecognizerIndex;  // the model-view index (internal)
 
+// What happened to each hypothesis the recognizer fitted (for measuring which stage loses an
+// object; filled only when asked for).
+struct RecognitionTrace {
+  enum class Outcome : uint8_t {
+    kFitFailed,        // fewer than 3 edges matched while fitting, or behind the camera
+    kMatchedFraction,  // too little of the visible predicted edge length matched
+    kReprojection,     // matched segments too far from the predicted edges
+    kSupport,          // too little edge support along the predicted outline
+    kImplausible,      // outside the work area, under the table or inside a fixed object
+    kCandidate,        // passed; then kept or dropped by the selection below
+  };
+  struct Fitted {
+    int model = 0;                             // index into the library
+    int group_kind = 0;                        // GroupKind
+    geometry::Pose3 initial_camera_T_object;   // the hypothesis' starting pose
+    geometry::Pose3 camera_T_object;           // after the fit
+    std::vector<geometry::Pose3> rounds;       // after each fitting round
+    Outcome outcome = Outcome::kFitFailed;
+    bool accepted = false;                     // among the final recognitions
+  };
+  int lines = 0, groups = 0, hypotheses = 0;
+  std::vector<Fitted> fitted;
+};
+
 class Recognizer {
  public:
   // Builds the model-view index, or loads it from cache_dir when the library and the index options
@@ -119,7 +144,8 @@ class Recognizer {
   // model editor's rules use (objects near z = 0 or a fixed object's top rest on it; recognitions
   // inside fixed objects are culled); may be null (then z = 0 is the table).
   [[nodiscard]] Result<RecognitionResult> Recognize(const cv::Mat& image_gray8, const Camera& camera,
-                                                    const scene::Scene* fixed_world) const;
+                                                    const scene::Scene* fixed_world,
+                                                    RecognitionTrace* trace = nullptr) const;
 
   const ModelLibrary& models() const { return models_; }
   const RecognizerOptions& options() const { return options_; }
