@@ -399,3 +399,450 @@ Result<ExtrinsicsResult> CalibrateExtrinsics(const Camera& camera,
 }
 
 }  // namespace teachsim::vision
+
+namespace teachsim::vision {
+
+namespace {
+
+// A sub-pixel edge point: position in the distorted image and in the undistorted one (where the
+// lines are fitted), the gradient's unit normal and magnitude.
+struct EdgePoint {
+  Eigen::Vector2d pixel, ideal;
+  Eigen::Vector2d normal;
+  double angle = 0;  // of the normal, mod pi
+  double weight = 0;
+};
+
+// A line n . x = c in undistorted pixels, with what its fit says about its accuracy.
+struct EdgeLine {
+  Eigen::Vector2d normal{1, 0};
+  double c = 0;
+  Eigen::Vector2d centroid{0, 0};
+  double offset_var = 0;  // variance of c at the centroid, px^2
+  double slope_var = 0;   // variance of the direction, rad^2
+  double rms_px = 0;
+  std::vector<int> members;  // indices into the edge points
+};
+
+double AngleDiff(double a, double b) {  // between two directions mod pi
+  double d = std::fmod(std::abs(a - b), M_PI);
+  return std::min(d, M_PI - d);
+}
+
+float Bilinear(const cv::Mat& m, double x, double y) {
+  x = std::clamp(x, 0.0, m.cols - 1.001);
+  y = std::clamp(y, 0.0, m.rows - 1.001);
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const double fx = x - x0, fy = y - y0;
+  const float* r0 = m.ptr<float>(y0);
+  const float* r1 = m.ptr<float>(y0 + 1);
+  return static_cast<float>((1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
+                            fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]));
+}
+
+// Weighted total least squares over `members`; false when degenerate.
+bool FitLine(const std::vector<EdgePoint>& points, EdgeLine& line) {
+  double w_sum = 0;
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (int i : line.members) {
+    w_sum += points[static_cast<std::size_t>(i)].weight;
+    mean += points[static_cast<std::size_t>(i)].weight * points[static_cast<std::size_t>(i)].ideal;
+  }
+  if (line.members.size() < 2 || w_sum <= 0) return false;
+  mean /= w_sum;
+  Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
+  for (int i : line.members) {
+    const Eigen::Vector2d d = points[static_cast<std::size_t>(i)].ideal - mean;
+    scatter += points[static_cast<std::size_t>(i)].weight * d * d.transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(scatter);
+  Eigen::Vector2d normal = eigen.eigenvectors().col(0);
+  // Keep the normal's sense stable (it is compared by angle mod pi only).
+  if (normal.dot(line.normal) < 0) normal = -normal;
+  line.normal = normal;
+  line.centroid = mean;
+  line.c = normal.dot(mean);
+  const double n = static_cast<double>(line.members.size());
+  const double along_var = eigen.eigenvalues()(1) / w_sum;  // spread along the line, px^2
+  const double residual_var = eigen.eigenvalues()(0) / w_sum * n / std::max(1.0, n - 2);
+  line.rms_px = std::sqrt(eigen.eigenvalues()(0) / w_sum);
+  line.offset_var = residual_var / n;
+  line.slope_var = along_var > 0 ? residual_var / (n * along_var) : 1e9;
+  return true;
+}
+
+// The point minimizing the weighted squared distances to the lines, and its covariance.
+bool IntersectLines(const std::vector<EdgeLine>& lines, Eigen::Vector2d& point, Eigen::Matrix2d& covariance,
+                    const Eigen::Vector2d& near) {
+  // Each line's offset variance at the (expected) intersection: offset at the centroid plus the
+  // direction's error levered over the distance from the centroid.
+  Eigen::Matrix2d a = Eigen::Matrix2d::Zero();
+  Eigen::Vector2d b = Eigen::Vector2d::Zero();
+  for (const EdgeLine& l : lines) {
+    const Eigen::Vector2d t(-l.normal.y(), l.normal.x());
+    const double lever = t.dot(near - l.centroid);
+    const double var = l.offset_var + l.slope_var * lever * lever + 1e-6;
+    a += l.normal * l.normal.transpose() / var;
+    b += l.normal * l.c / var;
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(a);
+  if (!(eigen.eigenvalues()(0) > 1e-9 * eigen.eigenvalues()(1))) return false;
+  point = a.ldlt().solve(b);
+  covariance = a.inverse();
+  return point.allFinite();
+}
+
+SnapResult SnapWithCornerSubPix(const cv::Mat& gray, const Eigen::Vector2d& click,
+                                const SnapOptions& options) {
+  SnapResult r;
+  r.pixel = click;
+  const int half = std::max(2, static_cast<int>(std::lround(options.window_px / 2)));
+  std::vector<cv::Point2f> corner{cv::Point2f(static_cast<float>(click.x()), static_cast<float>(click.y()))};
+  try {
+    cv::cornerSubPix(gray, corner, cv::Size(half, half), cv::Size(-1, -1),
+                     cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-4));
+  } catch (const cv::Exception& e) {
+    r.reason = std::string("cornerSubPix failed: ") + e.what();
+    return r;
+  }
+  const Eigen::Vector2d snapped(corner[0].x, corner[0].y);
+  if (!snapped.allFinite() || (snapped - click).norm() > options.max_offset_px) {
+    r.reason = "cornerSubPix moved the point " + json::FormatNumber((snapped - click).norm()) +
+               " px (more than " + json::FormatNumber(options.max_offset_px) + ")";
+    return r;
+  }
+  r.snapped = true;
+  r.pixel = snapped;
+  r.offset_px = (snapped - click).norm();
+  return r;
+}
+
+}  // namespace
+
+Status SnapOptions::Validate() const {
+  auto positive = [](double v) { return v > 0 && std::isfinite(v); };
+  if (!positive(window_px) || window_px < 4 || window_px > 64) {
+    return Status::InvalidInput("SnapOptions::window_px = " + json::FormatNumber(window_px) +
+                                " must be in [4, 64] px");
+  }
+  if (!positive(max_offset_px)) {
+    return Status::InvalidInput("SnapOptions::max_offset_px = " + json::FormatNumber(max_offset_px) +
+                                " must be > 0 px");
+  }
+  if (!(junction_px >= 0) || junction_px >= window_px - 3) {
+    return Status::InvalidInput("SnapOptions::junction_px = " + json::FormatNumber(junction_px) +
+                                " must be >= 0 and leave at least 3 px of the window");
+  }
+  if (!(smooth_sigma_px >= 0) || smooth_sigma_px > 5) {
+    return Status::InvalidInput("SnapOptions::smooth_sigma_px = " + json::FormatNumber(smooth_sigma_px) +
+                                " must be in [0, 5] px");
+  }
+  if (!(min_gradient >= 0) || !(relative_gradient >= 0 && relative_gradient < 1)) {
+    return Status::InvalidInput("SnapOptions: min_gradient must be >= 0 and relative_gradient in [0, 1)");
+  }
+  if (!(min_step >= 0) || !std::isfinite(min_step)) {
+    return Status::InvalidInput("SnapOptions::min_step = " + json::FormatNumber(min_step) + " must be >= 0");
+  }
+  if (min_edge_points < 3) {
+    return Status::InvalidInput("SnapOptions::min_edge_points = " + std::to_string(min_edge_points) +
+                                " must be >= 3");
+  }
+  if (!(min_edge_angle_rad > 0 && min_edge_angle_rad < M_PI / 2)) {
+    return Status::InvalidInput("SnapOptions::min_edge_angle_rad = " +
+                                json::FormatNumber(min_edge_angle_rad) + " must be in (0, pi/2)");
+  }
+  return Status::Ok();
+}
+
+SnapResult SnapToCorner(const cv::Mat& gray, const Camera& camera, const Eigen::Vector2d& click,
+                        const SnapOptions& options) {
+  TEACHSIM_CHECK(gray.type() == CV_8UC1);
+  SnapResult result;
+  result.pixel = click;
+  if (!click.allFinite() || !camera.InImage(click)) {
+    result.reason = "the click lies outside the image";
+    return result;
+  }
+  if (options.method == SnapMethod::kCornerSubPix) return SnapWithCornerSubPix(gray, click, options);
+
+  // The patch: the window plus a margin for the smoothing and the gradient.
+  const int margin = static_cast<int>(std::ceil(options.window_px + 3 * options.smooth_sigma_px + 3));
+  const int cu = static_cast<int>(std::lround(click.x())), cv_ = static_cast<int>(std::lround(click.y()));
+  const cv::Rect roi = cv::Rect(cu - margin, cv_ - margin, 2 * margin + 1, 2 * margin + 1) &
+                       cv::Rect(0, 0, gray.cols, gray.rows);
+  cv::Mat patch;
+  gray(roi).convertTo(patch, CV_32F);
+  if (options.smooth_sigma_px > 0) {
+    cv::GaussianBlur(patch, patch, cv::Size(0, 0), options.smooth_sigma_px, options.smooth_sigma_px,
+                     cv::BORDER_REPLICATE);
+  }
+  cv::Mat gx, gy, magnitude;
+  cv::Sobel(patch, gx, CV_32F, 1, 0, 3, 1.0 / 8, 0, cv::BORDER_REPLICATE);
+  cv::Sobel(patch, gy, CV_32F, 0, 1, 3, 1.0 / 8, 0, cv::BORDER_REPLICATE);
+  cv::magnitude(gx, gy, magnitude);
+
+  const Eigen::Vector2d origin(roi.x, roi.y);
+  const Eigen::Vector2d click_in_patch = click - origin;
+  const double window2 = options.window_px * options.window_px;
+  double strongest = 0;
+  for (int y = 1; y + 1 < patch.rows; ++y) {
+    for (int x = 1; x + 1 < patch.cols; ++x) {
+      if ((Eigen::Vector2d(x, y) - click_in_patch).squaredNorm() <= window2) {
+        strongest = std::max(strongest, static_cast<double>(magnitude.at<float>(y, x)));
+      }
+    }
+  }
+  const double threshold = std::max(options.min_gradient, options.relative_gradient * strongest);
+  if (strongest < options.min_gradient) {
+    result.reason =
+        "no edges near the click (strongest gradient " + json::FormatNumber(strongest) + " gray levels/px)";
+    return result;
+  }
+
+  // Sub-pixel edge points: local maxima of the gradient magnitude along the gradient, the peak
+  // placed by a parabola through three samples.
+  std::vector<EdgePoint> points;
+  for (int y = 1; y + 1 < patch.rows; ++y) {
+    for (int x = 1; x + 1 < patch.cols; ++x) {
+      const double m0 = magnitude.at<float>(y, x);
+      if (m0 < threshold) continue;
+      if ((Eigen::Vector2d(x, y) - click_in_patch).squaredNorm() > window2) continue;
+      const Eigen::Vector2d n = Eigen::Vector2d(gx.at<float>(y, x), gy.at<float>(y, x)) / m0;
+      const double minus = Bilinear(magnitude, x - n.x(), y - n.y());
+      const double plus = Bilinear(magnitude, x + n.x(), y + n.y());
+      if (!(m0 >= minus && m0 > plus)) continue;
+      const double curvature = minus - 2 * m0 + plus;
+      const double delta = curvature < 0 ? std::clamp(0.5 * (minus - plus) / curvature, -0.5, 0.5) : 0.0;
+      EdgePoint e;
+      e.pixel = origin + Eigen::Vector2d(x, y) + delta * n;
+      auto ideal = camera.UndistortPixel(e.pixel);
+      if (!ideal) continue;
+      e.ideal = *ideal;
+      e.normal = n;
+      e.angle = std::fmod(std::atan2(n.y(), n.x()) + 2 * M_PI, M_PI);
+      e.weight = m0;
+      points.push_back(e);
+    }
+  }
+  auto ideal_click = camera.UndistortPixel(click);
+  if (!ideal_click) {
+    result.reason = "the lens model has no inverse at the click";
+    return result;
+  }
+
+  // Lines through (near) the corner, strongest first. A weighted histogram of the gradients'
+  // directions (with their sense: an edge between two faces has one polarity all along, the two
+  // flanks of a grain stripe have opposite ones) gives a direction; a histogram of offsets along it
+  // gives candidate lines, each refined by a fit to the points near it. Of parallel candidates (the
+  // face's edge and the grain beside it) the one with the largest step in brightness across it
+  // wins: an edge separates two faces, a stripe of grain has the same face on both sides. Points
+  // close to the junction are left out (the blur rounds the corner).
+  auto angle_of = [](const Eigen::Vector2d& n) {
+    return std::fmod(std::atan2(n.y(), n.x()) + 2 * M_PI, 2 * M_PI);
+  };
+  auto oriented_diff = [](double a, double b) {
+    const double d = std::fmod(std::abs(a - b), 2 * M_PI);
+    return std::min(d, 2 * M_PI - d);
+  };
+  const double step_px = 2.5;  // brightness sampled this far either side of an edge point
+  auto step_contrast = [&](const EdgeLine& line) {
+    double sum = 0;
+    for (int i : line.members) {
+      const EdgePoint& e = points[static_cast<std::size_t>(i)];
+      const Eigen::Vector2d q = e.pixel - origin;
+      sum += Bilinear(patch, q.x() + step_px * e.normal.x(), q.y() + step_px * e.normal.y()) -
+             Bilinear(patch, q.x() - step_px * e.normal.x(), q.y() - step_px * e.normal.y());
+    }
+    return line.members.empty() ? 0.0 : sum / static_cast<double>(line.members.size());
+  };
+  auto find_lines = [&](const Eigen::Vector2d& corner) {
+    std::vector<EdgeLine> lines;
+    std::vector<bool> used(points.size(), false);
+    const double reach = options.max_offset_px + 1.5;
+    const double junction2 = options.junction_px * options.junction_px;
+    double first_support = 0;
+    std::vector<double> blocked_angles;  // directions tried (mod pi): lines through a corner differ more
+    for (int attempt = 0; attempt < 6 && lines.size() < 3; ++attempt) {
+      constexpr int kBins = 360;
+      std::vector<double> histogram(kBins, 0.0);
+      for (std::size_t i = 0; i < points.size(); ++i) {
+        if (used[i] || (points[i].ideal - corner).squaredNorm() < junction2) continue;
+        // Only points whose edge passes near the corner vote.
+        if (std::abs(points[i].normal.dot(points[i].ideal - corner)) > reach) continue;
+        const int bin = static_cast<int>(angle_of(points[i].normal) / (2 * M_PI) * kBins) % kBins;
+        histogram[static_cast<std::size_t>(bin)] += points[i].weight;
+      }
+      int best = 0;
+      double best_sum = 0;
+      for (int b = 0; b < kBins; ++b) {
+        const double a = (b + 0.5) * 2 * M_PI / kBins;
+        bool blocked = false;
+        for (const double x : blocked_angles) {
+          if (AngleDiff(x, a) < options.min_edge_angle_rad) blocked = true;
+        }
+        if (blocked) continue;
+        double sum = 0;
+        for (int k = -4; k <= 4; ++k) {
+          sum += (5 - std::abs(k)) * histogram[static_cast<std::size_t>((b + k + kBins) % kBins)];
+        }
+        if (sum > best_sum) {
+          best_sum = sum;
+          best = b;
+        }
+      }
+      if (best_sum <= 0 || (first_support > 0 && best_sum < 0.1 * first_support)) break;
+      const double angle = (best + 0.5) * 2 * M_PI / kBins;
+      blocked_angles.push_back(std::fmod(angle, M_PI));
+      const Eigen::Vector2d normal(std::cos(angle), std::sin(angle));
+      // The offset histogram, 0.5 px bins; its peaks are the candidate lines.
+      const int offset_bins = static_cast<int>(std::ceil(2 * reach / 0.5));
+      std::vector<double> offsets(static_cast<std::size_t>(offset_bins), 0.0);
+      for (std::size_t i = 0; i < points.size(); ++i) {
+        if (used[i] || oriented_diff(angle_of(points[i].normal), angle) > 0.15) continue;
+        if ((points[i].ideal - corner).squaredNorm() < junction2) continue;
+        const double d = normal.dot(points[i].ideal - corner);
+        if (std::abs(d) >= reach) continue;
+        offsets[static_cast<std::size_t>(
+            std::clamp(static_cast<int>((d + reach) / 0.5), 0, offset_bins - 1))] += points[i].weight;
+      }
+      std::vector<double> smoothed(offsets.size(), 0.0);
+      double peak = 0;
+      for (int b = 0; b < offset_bins; ++b) {
+        smoothed[static_cast<std::size_t>(b)] =
+            offsets[static_cast<std::size_t>(b)] +
+            0.5 * (b > 0 ? offsets[static_cast<std::size_t>(b - 1)] : 0) +
+            0.5 * (b + 1 < offset_bins ? offsets[static_cast<std::size_t>(b + 1)] : 0);
+        peak = std::max(peak, smoothed[static_cast<std::size_t>(b)]);
+      }
+      EdgeLine chosen;
+      double chosen_contrast = 0;
+      for (int b = 0; b < offset_bins; ++b) {
+        const double v = smoothed[static_cast<std::size_t>(b)];
+        if (v < 0.25 * peak || v <= 0) continue;
+        if ((b > 0 && smoothed[static_cast<std::size_t>(b - 1)] > v) ||
+            (b + 1 < offset_bins && smoothed[static_cast<std::size_t>(b + 1)] >= v)) {
+          continue;  // not a local maximum
+        }
+        EdgeLine line;
+        line.normal = normal;
+        line.c = normal.dot(corner) + (b + 0.5) * 0.5 - reach;
+        bool ok = false;
+        for (int iteration = 0; iteration < 4; ++iteration) {
+          line.members.clear();
+          const double band = iteration == 0 ? 1.0 : 0.7;
+          const double line_angle = angle_of(line.normal);
+          for (std::size_t i = 0; i < points.size(); ++i) {
+            if (used[i] || oriented_diff(angle_of(points[i].normal), line_angle) > 0.2) continue;
+            if ((points[i].ideal - corner).squaredNorm() < junction2) continue;
+            if (std::abs(line.normal.dot(points[i].ideal) - line.c) > band) continue;
+            line.members.push_back(static_cast<int>(i));
+          }
+          ok = static_cast<int>(line.members.size()) >= options.min_edge_points && FitLine(points, line);
+          if (!ok) break;
+        }
+        if (!ok) continue;
+        const Eigen::Vector2d t(-line.normal.y(), line.normal.x());
+        double lo = 1e9, hi = -1e9;
+        for (int i : line.members) {
+          const double s = t.dot(points[static_cast<std::size_t>(i)].ideal);
+          lo = std::min(lo, s);
+          hi = std::max(hi, s);
+        }
+        if (hi - lo < 4 || std::abs(line.normal.dot(corner) - line.c) > reach) continue;
+        const double contrast = step_contrast(line);
+        if (contrast > chosen_contrast) {
+          chosen_contrast = contrast;
+          chosen = std::move(line);
+        }
+      }
+      if (chosen.members.empty() || chosen_contrast < options.min_step) continue;
+      for (int i : chosen.members) used[static_cast<std::size_t>(i)] = true;
+      if (first_support == 0) first_support = best_sum;
+      blocked_angles.back() = std::fmod(angle_of(chosen.normal), M_PI);
+      lines.push_back(std::move(chosen));
+    }
+    return lines;
+  };
+
+  Eigen::Vector2d corner = *ideal_click;
+  Eigen::Matrix2d covariance = Eigen::Matrix2d::Zero();
+  std::vector<EdgeLine> lines;
+  // Twice: the second pass leaves out the points near the first estimate of the corner instead of
+  // near the click.
+  for (int pass = 0; pass < 2; ++pass) {
+    lines = find_lines(corner);
+    if (lines.size() < 2) {
+      result.reason = lines.empty() ? "no straight edge through the click"
+                                    : "only one straight edge through the click (not a corner?)";
+      return result;
+    }
+    Eigen::Vector2d next;
+    if (!IntersectLines(lines, next, covariance, corner)) {
+      result.reason = "the edges near the click are (nearly) parallel";
+      return result;
+    }
+    // Three lines that do not meet in a point (an edge of something else passing by): keep the two
+    // that agree best, i.e. drop the line farthest from the joint intersection.
+    if (lines.size() == 3) {
+      std::size_t worst = 0;
+      double worst_px = 0;
+      for (std::size_t i = 0; i < lines.size(); ++i) {
+        const double d = std::abs(lines[i].normal.dot(next) - lines[i].c);
+        if (d > worst_px) {
+          worst_px = d;
+          worst = i;
+        }
+      }
+      if (worst_px > 0.75) {
+        lines.erase(lines.begin() + static_cast<std::ptrdiff_t>(worst));
+        if (!IntersectLines(lines, next, covariance, corner)) {
+          result.reason = "the edges near the click are (nearly) parallel";
+          return result;
+        }
+      }
+    }
+    if ((next - *ideal_click).norm() > options.max_offset_px + 2) {
+      result.reason =
+          "the edges meet " + json::FormatNumber((next - *ideal_click).norm()) + " px from the click";
+      return result;
+    }
+    corner = next;
+  }
+  // Back to the distorted image.
+  const Intrinsics& k = camera.intrinsics();
+  const Eigen::Vector2d snapped =
+      camera.NormalizedToPixel({(corner.x() - k.cx) / k.fx, (corner.y() - k.cy) / k.fy});
+  const double offset = (snapped - click).norm();
+  if (!snapped.allFinite() || offset > options.max_offset_px) {
+    result.reason = "the edges meet " + json::FormatNumber(offset) + " px from the click (more than " +
+                    json::FormatNumber(options.max_offset_px) + ")";
+    return result;
+  }
+  double rms = 0;
+  int n = 0;
+  for (const EdgeLine& l : lines) {
+    rms += l.rms_px * l.rms_px * static_cast<double>(l.members.size());
+    n += static_cast<int>(l.members.size());
+  }
+  result.snapped = true;
+  result.pixel = snapped;
+  result.offset_px = offset;
+  result.sigma_px = std::sqrt(std::max(0.0, covariance.trace() / 2));
+  result.edges = static_cast<int>(lines.size());
+  result.edge_rms_px = std::sqrt(rms / std::max(1, n));
+  return result;
+}
+
+std::vector<SnapResult> SnapCorrespondences(const cv::Mat& gray, const Camera& camera,
+                                            std::vector<PointCorrespondence>& points,
+                                            const SnapOptions& options) {
+  std::vector<SnapResult> results;
+  results.reserve(points.size());
+  for (PointCorrespondence& p : points) {
+    results.push_back(SnapToCorner(gray, camera, p.pixel, options));
+    p.pixel = results.back().pixel;
+  }
+  return results;
+}
+
+}  // namespace teachsim::vision
