@@ -1,6 +1,7 @@
 // libFuzzer harnesses for the file loaders (issue 8, "Fuzzing"): scene, drag script, workpiece
 // path, robot program, camera, robot table, calibration points, model library, operator session.
-// One source, built once per loader with TEACHSIM_FUZZ_LOADER set to its name.
+// One source, compiled once and linked into one executable per loader, each of which defines
+// teachsim_fuzz_loader (its loader's name; fuzz/CMakeLists.txt generates that one line).
 //
 // Each input is what a file might hold. It must give a value or an error (InvalidInput naming the
 // input), never a crash, a hang or a sanitizer report; and whatever loads must write out and load
@@ -25,9 +26,7 @@
 #include "teachsim/vision/calibration.h"
 #include "teachsim/vision/recognizer.h"
 
-#ifndef TEACHSIM_FUZZ_LOADER
-#error "define TEACHSIM_FUZZ_LOADER"
-#endif
+extern "C" const char teachsim_fuzz_loader[];
 
 namespace {
 
@@ -36,7 +35,7 @@ using teachsim::Status;
 using teachsim::json::Json;
 
 [[noreturn]] void Broken(const char* what, const std::string& detail) {
-  std::fprintf(stderr, "loader fuzzer (%s): %s: %s\n", TEACHSIM_FUZZ_LOADER, what, detail.c_str());
+  std::fprintf(stderr, "loader fuzzer (%s): %s: %s\n", teachsim_fuzz_loader, what, detail.c_str());
   std::abort();
 }
 
@@ -67,7 +66,7 @@ std::string ScratchFile(std::string_view bytes) {
 
 void Run(std::string_view bytes) {
   using namespace teachsim;
-  const std::string loader = TEACHSIM_FUZZ_LOADER;
+  const std::string loader = teachsim_fuzz_loader;
   if (loader == "models") {
     // LoadModels reads a file (a scene or {"models": [...]}).
     Result<vision::ModelLibrary> models = vision::LoadModels(ScratchFile(bytes));
