@@ -253,14 +253,14 @@ int ConvexPolyhedron::Support(const Eigen::Vector3d& direction, int hint) const 
   const double dx = direction.x(), dy = direction.y(), dz = direction.z();
   const Eigen::Vector3d* v = vertices_.data();
   if (hint < 0 || hint >= n || n <= kScanVertices) {
+    // Branch-free (selects, not jumps): the maximum's position is unpredictable.
     int best = 0;
     double best_dot = v[0].x() * dx + v[0].y() * dy + v[0].z() * dz;
     for (int i = 1; i < n; ++i) {
       const double d = v[i].x() * dx + v[i].y() * dy + v[i].z() * dz;
-      if (d > best_dot) {
-        best_dot = d;
-        best = i;
-      }
+      const bool better = d > best_dot;
+      best_dot = better ? d : best_dot;
+      best = better ? i : best;
     }
     return best;
   }

@@ -23,6 +23,7 @@ double ClosestPointsBruteForce(const ConvexPolyhedron& a, const Pose3& world_T_a
                                const Pose3& world_T_b, Eigen::Vector3d* point_a, Eigen::Vector3d* point_b);
 
 constexpr int kMaxIterations = 64;
+constexpr int kTryFeaturesAt = 2;  // GJK iteration at which two boxes try their features
 constexpr double kTouching = 1e-12;  // m: |v| below this counts as intersecting
 
 // A point of C = B - A (A's frame) and the support vertices it came from. The points on A and B
@@ -265,6 +266,26 @@ bool SolveSimplexRobust(Simplex& s, Eigen::Vector3d* closest) {
 // The feature spanned by a set of vertex indices of p (count <= 4, duplicates allowed): a
 // vertex, the edge joining two, else the face holding them all (else the lowest vertex).
 Feature FeatureOf(const ConvexPolyhedron& p, const int* indices, int count) {
+  if (p.is_box()) {
+    // Box vertex numbering (bit k: sign of coordinate k): an edge joins two vertices differing in
+    // one bit, a face holds the vertices that agree in one bit (face 2k + that bit).
+    int all_set = 7, any_set = 0;
+    for (int i = 0; i < count; ++i) {
+      all_set &= indices[i];
+      any_set |= indices[i];
+    }
+    const int differ = all_set ^ any_set;
+    if (differ == 0) return {Feature::Type::kVertex, indices[0]};
+    if ((differ & (differ - 1)) == 0) {
+      if (const int e = p.EdgeBetween(all_set, any_set); e >= 0) return {Feature::Type::kEdge, e};
+    }
+    const int agree = ~differ & 7;
+    if (agree != 0) {
+      const int k = std::countr_zero(static_cast<unsigned>(agree));
+      return {Feature::Type::kFace, 2 * k + ((all_set >> k) & 1)};
+    }
+    return {Feature::Type::kVertex, *std::min_element(indices, indices + count)};
+  }
   if (p.vertices().size() <= 64) {
     // As a bit set: duplicates merge, the lowest index is the first set bit.
     std::uint64_t wanted = 0;
@@ -311,6 +332,379 @@ inline int BoxSupport(double dx, double dy, double dz) {
   return (dx > 0.0 ? 1 : 0) | (dy > 0.0 ? 2 : 0) | (dz > 0.0 ? 4 : 0);
 }
 
+// Closest-feature tracking for two boxes (I-COLLIDE, paper §5.1): when the previous query's
+// closest features still bound the answer, the distance costs one feature-pair distance and no
+// GJK iteration. A pair is accepted only with the separating-plane certificate GJK uses (each
+// box's extreme vertices along the normal are on its feature, and the closest points lie inside
+// both features), so the answer is exact: the plane's gap is a lower bound, the two points an
+// upper bound, and they agree. Work happens in A's frame, where A's faces are axis-aligned.
+struct BoxPair {
+  const ConvexPolyhedron& a;
+  const ConvexPolyhedron& b;
+  const Eigen::Matrix3d& r_ab;  // B's directions and points in A's frame
+  const Eigen::Vector3d& t_ab;
+  Eigen::Vector3d half_a, half_b;
+};
+
+struct FeatureAnswer {
+  Feature feature_a, feature_b;
+  Eigen::Vector3d point_a, point_b;  // A's frame
+  Eigen::Vector3d normal;            // A's frame, unit, from A toward B
+  double distance = 0.0;             // the certified plane gap
+  int simplex_a[3] = {0, 0, 0}, simplex_b[3] = {0, 0, 0};  // a GJK simplex spanning the features
+  int simplex_n = 0;
+};
+
+// True when box vertex v (bit k: sign of coordinate k) is extreme along d: bit k set where
+// d_k > 0 and clear where d_k < 0; axis `skip` (along the feature) is not checked.
+inline bool BoxVertexExtreme(int v, const Eigen::Vector3d& d, int skip = -1) {
+  for (int k = 0; k < 3; ++k) {
+    if (k == skip) continue;
+    if ((v >> k) & 1 ? d[k] < 0.0 : d[k] > 0.0) return false;
+  }
+  return true;
+}
+
+// Vertex ib of B against face f of A. On a failed support check, *better is B's extreme vertex.
+bool VertexOfBFaceOfA(const BoxPair& p, int ib, int f, FeatureAnswer* out, int* better) {
+  const int k = f >> 1;
+  const double s = (f & 1) ? 1.0 : -1.0;
+  const Eigen::Vector3d q = p.r_ab * p.b.vertices()[ib] + p.t_ab;
+  const double gap = s * q[k] - p.half_a[k];
+  if (!(gap > kTouching)) return false;
+  const Eigen::Vector3d toward_a = -s * p.r_ab.row(k).transpose();  // B's frame
+  if (!BoxVertexExtreme(ib, toward_a)) {
+    *better = BoxSupport(toward_a.x(), toward_a.y(), toward_a.z());
+    return false;
+  }
+  const int i = (k + 1) % 3, j = (k + 2) % 3;
+  if (std::abs(q[i]) > p.half_a[i] || std::abs(q[j]) > p.half_a[j]) return false;
+  out->feature_a = {Feature::Type::kFace, f};
+  out->feature_b = {Feature::Type::kVertex, ib};
+  out->point_b = q;
+  out->point_a = q;
+  out->point_a[k] = s * p.half_a[k];
+  out->normal = Eigen::Vector3d::Zero();
+  out->normal[k] = s;
+  out->distance = gap;
+  const std::vector<int>& fv = p.a.faces()[f].vertices;
+  for (int m = 0; m < 3; ++m) {
+    out->simplex_a[m] = fv[m];
+    out->simplex_b[m] = ib;
+  }
+  out->simplex_n = 3;
+  return true;
+}
+
+// Face f of B against vertex ia of A. On a failed support check, *better is A's extreme vertex.
+bool FaceOfBVertexOfA(const BoxPair& p, int f, int ia, FeatureAnswer* out, int* better) {
+  const int k = f >> 1;
+  const double s = (f & 1) ? 1.0 : -1.0;
+  const Eigen::Vector3d& x = p.a.vertices()[ia];
+  const Eigen::Vector3d x_in_b = p.r_ab.transpose() * (x - p.t_ab);
+  const double gap = s * x_in_b[k] - p.half_b[k];
+  if (!(gap > kTouching)) return false;
+  const Eigen::Vector3d n_b = s * p.r_ab.col(k);  // B's face normal in A's frame, toward A
+  const Eigen::Vector3d toward_b = -n_b;
+  if (!BoxVertexExtreme(ia, toward_b)) {
+    *better = BoxSupport(toward_b.x(), toward_b.y(), toward_b.z());
+    return false;
+  }
+  const int i = (k + 1) % 3, j = (k + 2) % 3;
+  if (std::abs(x_in_b[i]) > p.half_b[i] || std::abs(x_in_b[j]) > p.half_b[j]) return false;
+  out->feature_a = {Feature::Type::kVertex, ia};
+  out->feature_b = {Feature::Type::kFace, f};
+  out->point_a = x;
+  out->point_b = x - gap * n_b;
+  out->normal = toward_b;
+  out->distance = gap;
+  const std::vector<int>& fv = p.b.faces()[f].vertices;
+  for (int m = 0; m < 3; ++m) {
+    out->simplex_a[m] = ia;
+    out->simplex_b[m] = fv[m];
+  }
+  out->simplex_n = 3;
+  return true;
+}
+
+// Edge ea of A against edge eb of B.
+bool EdgeEdge(const BoxPair& p, int ea, int eb, FeatureAnswer* out) {
+  const Edge& edge_a = p.a.edges()[ea];
+  const Edge& edge_b = p.b.edges()[eb];
+  const Eigen::Vector3d& p0 = p.a.vertices()[edge_a.v0];
+  const Eigen::Vector3d da = p.a.vertices()[edge_a.v1] - p0;  // along one axis of A exactly
+  const Eigen::Vector3d q0 = p.r_ab * p.b.vertices()[edge_b.v0] + p.t_ab;
+  const Eigen::Vector3d db = p.r_ab * p.b.vertices()[edge_b.v1] + p.t_ab - q0;
+  const Eigen::Vector3d n = da.cross(db);
+  const double aa = da.squaredNorm(), bb = db.squaredNorm(), ab = da.dot(db);
+  const double denom = aa * bb - ab * ab;  // = |n|^2
+  if (!(denom > 1e-6 * aa * bb)) return false;  // near-parallel edges: GJK decides
+  const Eigen::Vector3d r = q0 - p0;
+  const double ra = da.dot(r), rb = db.dot(r);
+  const double sa = (ra * bb - ab * rb) / denom;  // parameter on A's edge
+  const double sb = (ab * ra - aa * rb) / denom;  // parameter on B's edge
+  if (!(sa > 0.0 && sa < 1.0 && sb > 0.0 && sb < 1.0)) return false;
+  const double side = n.dot(r);
+  if (!(std::abs(side) > 0.0)) return false;
+  const Eigen::Vector3d m = side > 0.0 ? n : Eigen::Vector3d(-n);  // from A toward B
+  const int axis_a = std::countr_zero(static_cast<unsigned>(edge_a.v0 ^ edge_a.v1));
+  const int axis_b = std::countr_zero(static_cast<unsigned>(edge_b.v0 ^ edge_b.v1));
+  if (!BoxVertexExtreme(edge_a.v0, m, axis_a)) return false;
+  if (!BoxVertexExtreme(edge_b.v0, -(p.r_ab.transpose() * m), axis_b)) return false;
+  const double norm = std::sqrt(denom);
+  const double gap = std::abs(side) / norm;
+  if (!(gap > kTouching)) return false;
+  out->feature_a = {Feature::Type::kEdge, ea};
+  out->feature_b = {Feature::Type::kEdge, eb};
+  out->point_a = p0 + sa * da;
+  out->point_b = q0 + sb * db;
+  out->normal = m / norm;
+  out->distance = gap;
+  out->simplex_a[0] = edge_a.v0;
+  out->simplex_b[0] = edge_b.v0;
+  out->simplex_a[1] = edge_a.v1;
+  out->simplex_b[1] = edge_b.v0;
+  out->simplex_a[2] = edge_a.v0;
+  out->simplex_b[2] = edge_b.v1;
+  out->simplex_n = 3;
+  return true;
+}
+
+// Vertex ia of A against edge eb of B, or (a_edge) edge ea of A against vertex ib of B: the
+// closest point on the edge's segment, certified along the joining direction.
+bool VertexEdge(const BoxPair& p, int ia, int eb, FeatureAnswer* out) {
+  const Edge& edge = p.b.edges()[eb];
+  const Eigen::Vector3d& x = p.a.vertices()[ia];
+  const Eigen::Vector3d q0 = p.r_ab * p.b.vertices()[edge.v0] + p.t_ab;
+  const Eigen::Vector3d db = p.r_ab * p.b.vertices()[edge.v1] + p.t_ab - q0;
+  const double t = (x - q0).dot(db) / db.squaredNorm();
+  if (!(t > 0.0 && t < 1.0)) return false;
+  const Eigen::Vector3d q = q0 + t * db;
+  const Eigen::Vector3d v = q - x;  // from A toward B
+  const int axis_b = std::countr_zero(static_cast<unsigned>(edge.v0 ^ edge.v1));
+  if (!BoxVertexExtreme(ia, v) || !BoxVertexExtreme(edge.v0, -(p.r_ab.transpose() * v), axis_b)) return false;
+  const double gap = v.norm();
+  if (!(gap > kTouching)) return false;
+  out->feature_a = {Feature::Type::kVertex, ia};
+  out->feature_b = {Feature::Type::kEdge, eb};
+  out->point_a = x;
+  out->point_b = q;
+  out->normal = v / gap;
+  out->distance = gap;
+  out->simplex_a[0] = out->simplex_a[1] = ia;
+  out->simplex_b[0] = edge.v0;
+  out->simplex_b[1] = edge.v1;
+  out->simplex_n = 2;
+  return true;
+}
+
+bool EdgeVertex(const BoxPair& p, int ea, int ib, FeatureAnswer* out) {
+  const Edge& edge = p.a.edges()[ea];
+  const Eigen::Vector3d y = p.r_ab * p.b.vertices()[ib] + p.t_ab;
+  const Eigen::Vector3d& p0 = p.a.vertices()[edge.v0];
+  const Eigen::Vector3d da = p.a.vertices()[edge.v1] - p0;
+  const double t = (y - p0).dot(da) / da.squaredNorm();
+  if (!(t > 0.0 && t < 1.0)) return false;
+  const Eigen::Vector3d x = p0 + t * da;
+  const Eigen::Vector3d v = y - x;
+  const int axis_a = std::countr_zero(static_cast<unsigned>(edge.v0 ^ edge.v1));
+  if (!BoxVertexExtreme(edge.v0, v, axis_a) || !BoxVertexExtreme(ib, -(p.r_ab.transpose() * v))) return false;
+  const double gap = v.norm();
+  if (!(gap > kTouching)) return false;
+  out->feature_a = {Feature::Type::kEdge, ea};
+  out->feature_b = {Feature::Type::kVertex, ib};
+  out->point_a = x;
+  out->point_b = y;
+  out->normal = v / gap;
+  out->distance = gap;
+  out->simplex_a[0] = edge.v0;
+  out->simplex_a[1] = edge.v1;
+  out->simplex_b[0] = out->simplex_b[1] = ib;
+  out->simplex_n = 2;
+  return true;
+}
+
+bool VertexVertex(const BoxPair& p, int ia, int ib, FeatureAnswer* out) {
+  const Eigen::Vector3d& x = p.a.vertices()[ia];
+  const Eigen::Vector3d y = p.r_ab * p.b.vertices()[ib] + p.t_ab;
+  const Eigen::Vector3d v = y - x;
+  if (!BoxVertexExtreme(ia, v) || !BoxVertexExtreme(ib, -(p.r_ab.transpose() * v))) return false;
+  const double gap = v.norm();
+  if (!(gap > kTouching)) return false;
+  out->feature_a = {Feature::Type::kVertex, ia};
+  out->feature_b = {Feature::Type::kVertex, ib};
+  out->point_a = x;
+  out->point_b = y;
+  out->normal = v / gap;
+  out->distance = gap;
+  out->simplex_a[0] = ia;
+  out->simplex_b[0] = ib;
+  out->simplex_n = 1;
+  return true;
+}
+
+// Nearly parallel faces (I-COLLIDE's failure case): face fa of A and face fb of B, facing each
+// other. The gap along A's face normal is affine over B's face, so its minimum over the overlap
+// of the two faces (seen along A's normal) is at a vertex of that overlap: a vertex of B inside
+// A's face, a corner of A's face inside B's, or a crossing of their edges. That vertex names the
+// feature pair to try (clipping the faces' projections, without building the polygon); the
+// certificate in the pair functions decides, and GJK takes over when it does not hold.
+bool FaceFace(const BoxPair& p, int fa, int fb, FeatureAnswer* out) {
+  const int k = fa >> 1, i = (k + 1) % 3, j = (k + 2) % 3;
+  const double s = (fa & 1) ? 1.0 : -1.0;
+  const double hi = p.half_a[i], hj = p.half_a[j];
+  const Face& face_b = p.b.faces()[fb];
+  Eigen::Vector3d q[4];
+  for (int m = 0; m < 4; ++m) q[m] = p.r_ab * p.b.vertices()[face_b.vertices[m]] + p.t_ab;
+  // B's face plane in A's frame, to lift A's corners onto it: n . x = c.
+  const Eigen::Vector3d n_b = ((fb & 1) ? 1.0 : -1.0) * p.r_ab.col(fb >> 1);
+  if (!(std::abs(n_b[k]) > 0.5)) return false;  // not facing
+  const double c = n_b.dot(q[0]);
+  enum class Kind { kVertexB, kCornerA, kCrossing } kind = Kind::kVertexB;
+  double best = std::numeric_limits<double>::infinity();
+  int best_b = -1, best_corner = 0, cross_edge_b = -1, cross_axis = 0, cross_sign = 0;
+  for (int m = 0; m < 4; ++m) {
+    if (std::abs(q[m][i]) <= hi && std::abs(q[m][j]) <= hj && s * q[m][k] < best) {
+      best = s * q[m][k];
+      kind = Kind::kVertexB;
+      best_b = m;
+    }
+  }
+  // Corners of A's face inside B's face (seen along A's normal): inside all four edge lines.
+  for (int corner = 0; corner < 4; ++corner) {
+    const double ci = (corner & 1) ? hi : -hi, cj = (corner & 2) ? hj : -hj;
+    // Lift onto B's plane along A's normal.
+    const double ck = (c - n_b[i] * ci - n_b[j] * cj) / n_b[k];
+    if (!(s * ck < best)) continue;
+    bool inside = true;
+    for (int m = 0; m < 4 && inside; ++m) {
+      const Eigen::Vector3d& u = q[m];
+      const Eigen::Vector3d& w = q[(m + 1) & 3];
+      const double cross = (w[i] - u[i]) * (cj - u[j]) - (w[j] - u[j]) * (ci - u[i]);
+      inside = cross * n_b[k] >= 0.0;  // B's loop turns counter-clockwise about n_b
+    }
+    if (inside) {
+      best = s * ck;
+      kind = Kind::kCornerA;
+      best_corner = corner;
+    }
+  }
+  // B's edges crossing the lines of A's face edges.
+  for (int m = 0; m < 4; ++m) {
+    const Eigen::Vector3d& u = q[m];
+    const Eigen::Vector3d& w = q[(m + 1) & 3];
+    for (int line = 0; line < 4; ++line) {
+      const int along = line < 2 ? i : j, other = line < 2 ? j : i;
+      const double bound = (line & 1) ? (along == i ? hi : hj) : -(along == i ? hi : hj);
+      const double du = u[along] - bound, dw = w[along] - bound;
+      if (!(du * dw < 0.0)) continue;
+      const double t = du / (du - dw);
+      const Eigen::Vector3d x = u + t * (w - u);
+      if (std::abs(x[other]) > (other == i ? hi : hj) || !(s * x[k] < best)) continue;
+      best = s * x[k];
+      kind = Kind::kCrossing;
+      cross_edge_b = face_b.edges[m];
+      cross_axis = along;
+      cross_sign = (line & 1) ? 1 : 0;
+    }
+  }
+  if (!std::isfinite(best)) return false;
+  int better = -1;
+  const int top = (fa & 1) << k;  // bit k of the vertices of A's face
+  switch (kind) {
+    case Kind::kVertexB:
+      return VertexOfBFaceOfA(p, face_b.vertices[best_b], fa, out, &better);
+    case Kind::kCornerA: {
+      const int ia = top | ((best_corner & 1) << i) | (((best_corner >> 1) & 1) << j);
+      return FaceOfBVertexOfA(p, fb, ia, out, &better);
+    }
+    case Kind::kCrossing: {
+      // A's edge lies on the line: bit cross_axis fixed, running along the third axis.
+      const int run = cross_axis == i ? j : i;
+      const int v0 = top | (cross_sign << cross_axis);
+      const int ea = p.a.EdgeBetween(v0, v0 | (1 << run));
+      return ea >= 0 && EdgeEdge(p, ea, cross_edge_b, out);
+    }
+  }
+  return false;
+}
+
+// The faces of A and B that face each other most nearly head-on, when their normals are within
+// ~5 degrees of opposite (A's frame: B's axis l against A's axis k).
+bool FacingFaces(const BoxPair& p, int* fa, int* fb) {
+  int k = 0, l = 0;
+  double most = 0.0;
+  for (int r = 0; r < 3; ++r) {
+    for (int col = 0; col < 3; ++col) {
+      if (std::abs(p.r_ab(r, col)) > most) {
+        most = std::abs(p.r_ab(r, col));
+        k = r;
+        l = col;
+      }
+    }
+  }
+  if (most < 0.996) return false;
+  const bool up = p.t_ab[k] > 0.0;  // B beyond A's +k face
+  *fa = 2 * k + (up ? 1 : 0);
+  // B's face whose outward normal points back toward A.
+  const bool b_positive = (p.r_ab(k, l) > 0.0) != up;
+  *fb = 2 * l + (b_positive ? 1 : 0);
+  return true;
+}
+
+// The cached feature pair, or (vertex-face pairs) the same face with the other box's new extreme
+// vertex: the step I-COLLIDE takes when a vertex leaves its Voronoi region across the face.
+bool TrackPair(const BoxPair& p, const Feature& fa, const Feature& fb, FeatureAnswer* out) {
+  int better = -1;
+  if (fa.type == Feature::Type::kFace && fb.type == Feature::Type::kVertex) {
+    if (VertexOfBFaceOfA(p, fb.index, fa.index, out, &better)) return true;
+    return better >= 0 && VertexOfBFaceOfA(p, better, fa.index, out, &better);
+  }
+  if (fa.type == Feature::Type::kVertex && fb.type == Feature::Type::kFace) {
+    if (FaceOfBVertexOfA(p, fb.index, fa.index, out, &better)) return true;
+    return better >= 0 && FaceOfBVertexOfA(p, fb.index, better, out, &better);
+  }
+  if (fa.type == Feature::Type::kEdge && fb.type == Feature::Type::kEdge) return EdgeEdge(p, fa.index, fb.index, out);
+  if (fa.type == Feature::Type::kVertex && fb.type == Feature::Type::kEdge) return VertexEdge(p, fa.index, fb.index, out);
+  if (fa.type == Feature::Type::kEdge && fb.type == Feature::Type::kVertex) return EdgeVertex(p, fa.index, fb.index, out);
+  if (fa.type == Feature::Type::kVertex && fb.type == Feature::Type::kVertex) {
+    return VertexVertex(p, fa.index, fb.index, out);
+  }
+  return false;
+}
+
+// The cached pair or its neighbour; else, for nearly parallel faces (edge-face and face-face
+// pairs, or a pair that left its region between them), the face-face step.
+bool TrackFeatures(const BoxPair& p, const Feature& fa, const Feature& fb, FeatureAnswer* out) {
+  if (TrackPair(p, fa, fb, out)) return true;
+  int face_a = 0, face_b = 0;
+  return FacingFaces(p, &face_a, &face_b) && FaceFace(p, face_a, face_b, out);
+}
+
+// A result from a certified feature pair; the cache then holds a simplex spanning that pair.
+DistanceResult FeatureResult(const Pose3& world_T_a, const FeatureAnswer& answer, DistanceCache* cache) {
+  DistanceResult result;
+  const Eigen::Matrix3d r_world_a = world_T_a.rotation.toRotationMatrix();
+  result.point_a = r_world_a * answer.point_a + world_T_a.translation;
+  result.point_b = r_world_a * answer.point_b + world_T_a.translation;
+  result.normal = r_world_a * answer.normal;
+  result.upper_bound = (answer.point_b - answer.point_a).norm();
+  result.distance = std::min(answer.distance, result.upper_bound);
+  result.feature_a = answer.feature_a;
+  result.feature_b = answer.feature_b;
+  if (cache != nullptr && (cache->count == 0 || cache->feature_a != answer.feature_a ||
+                           cache->feature_b != answer.feature_b)) {
+    cache->count = static_cast<std::int8_t>(answer.simplex_n);
+    for (int i = 0; i < answer.simplex_n; ++i) {
+      cache->index_a[i] = static_cast<std::int16_t>(answer.simplex_a[i]);
+      cache->index_b[i] = static_cast<std::int16_t>(answer.simplex_b[i]);
+    }
+    cache->feature_a = answer.feature_a;
+    cache->feature_b = answer.feature_b;
+  }
+  return result;
+}
+
 }  // namespace
 
 DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const ConvexPolyhedron& b,
@@ -326,16 +720,36 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
   const int nb = static_cast<int>(b.vertices().size());
   const bool box_a = a.is_box(), box_b = b.is_box();
 
+  if (box_a && box_b) {
+    const BoxPair pair{a, b, r_ab, t_ab, a.local_bounds().max, b.local_bounds().max};
+    FeatureAnswer answer;
+    if (cache != nullptr && cache->count > 0) {
+      if (TrackFeatures(pair, cache->feature_a, cache->feature_b, &answer)) {
+        return FeatureResult(world_T_a, answer, cache);
+      }
+    } else if (int face_a = 0, face_b = 0;
+               FacingFaces(pair, &face_a, &face_b) && FaceFace(pair, face_a, face_b, &answer)) {
+      // Cold, nearly parallel faces: where GJK would walk across the flat simplices.
+      return FeatureResult(world_T_a, answer, cache);
+    }
+  }
+
   auto point_b = [&](int ib) -> Eigen::Vector3d { return r_ab * vb[ib] + t_ab; };
+  // Hill-climbing hints only on warm queries: a cold query's first directions jump across the
+  // polyhedron, where a climb from the last support vertex takes many dependent steps and the
+  // scan is faster (convex-convex bench, 8-40 vertices: about 2x).
   int hint_a = -1, hint_b = -1;
+  bool climb = false;
   // Support of C = B - A in direction d (A's frame): max over B of d.b, min over A of d.a.
   auto support = [&](const Eigen::Vector3d& d) {
     Vertex out;
     const Eigen::Vector3d d_in_b = r_ab.transpose() * d;
     out.ib = box_b ? BoxSupport(d_in_b.x(), d_in_b.y(), d_in_b.z()) : b.Support(d_in_b, hint_b);
     out.ia = box_a ? BoxSupport(-d.x(), -d.y(), -d.z()) : a.Support(-d, hint_a);
-    hint_a = out.ia;
-    hint_b = out.ib;
+    if (climb) {
+      hint_a = out.ia;
+      hint_b = out.ib;
+    }
     out.w = point_b(out.ib) - va[out.ia];
     return out;
   };
@@ -356,6 +770,7 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
     if (s.n > 0) {
       hint_a = s.v[0].ia;
       hint_b = s.v[0].ib;
+      climb = true;
     }
   }
   if (s.n == 0) {
@@ -392,6 +807,22 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
     }
     s.v[s.n++] = w;
     inside = robust ? SolveSimplexRobust(s, &v) : SolveSimplex(s, &v);
+    if (box_a && box_b && iterations == kTryFeaturesAt && !inside && s.n < 4) {
+      // Two boxes: once the simplex has settled, its features usually are the closest pair, and
+      // certifying them costs less than the iterations GJK needs to close its gap.
+      int fa_idx[4], fb_idx[4];
+      for (int i = 0; i < s.n; ++i) {
+        fa_idx[i] = s.v[i].ia;
+        fb_idx[i] = s.v[i].ib;
+      }
+      const BoxPair pair{a, b, r_ab, t_ab, a.local_bounds().max, b.local_bounds().max};
+      FeatureAnswer answer;
+      if (TrackPair(pair, FeatureOf(a, fa_idx, s.n), FeatureOf(b, fb_idx, s.n), &answer)) {
+        DistanceResult r = FeatureResult(world_T_a, answer, cache);
+        r.iterations = iterations;
+        return r;
+      }
+    }
     const double norm = v.norm();
     if (norm >= previous_norm && norm >= vnorm) {
       if (robust) break;  // no progress
@@ -434,14 +865,25 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
     ia[i] = s.v[i].ia;
     ib[i] = s.v[i].ib;
   }
-  result.feature_a = FeatureOf(a, ia, s.n);
-  result.feature_b = FeatureOf(b, ib, s.n);
-  if (cache != nullptr) {
+  // The same support vertices as the cached simplex span the same features (the common case of
+  // a warm query: the closest features did not change, as I-COLLIDE's feature tracking).
+  bool same = cache != nullptr && cache->count == s.n;
+  for (int i = 0; same && i < s.n; ++i) same = cache->index_a[i] == ia[i] && cache->index_b[i] == ib[i];
+  if (same) {
+    result.feature_a = cache->feature_a;
+    result.feature_b = cache->feature_b;
+  } else {
+    result.feature_a = FeatureOf(a, ia, s.n);
+    result.feature_b = FeatureOf(b, ib, s.n);
+  }
+  if (cache != nullptr && !same) {
     cache->count = static_cast<std::int8_t>(s.n);
     for (int i = 0; i < s.n; ++i) {
       cache->index_a[i] = static_cast<std::int16_t>(s.v[i].ia);
       cache->index_b[i] = static_cast<std::int16_t>(s.v[i].ib);
     }
+    cache->feature_a = result.feature_a;
+    cache->feature_b = result.feature_b;
   }
   return result;
 }

@@ -61,6 +61,76 @@ TEST(Distance, BoxBoxMatchesOracleOnRandomNearParallelAndParallelPoses) {
   EXPECT_GE(total, 100000);
 }
 
+// How far `point` (world) is from the feature it is reported on.
+double OffFeature(const ConvexPolyhedron& p, const Pose3& world_T_p, const Feature& f, const Eigen::Vector3d& point) {
+  const Eigen::Vector3d local = world_T_p.Inverse() * point;
+  switch (f.type) {
+    case Feature::Type::kVertex:
+      return (local - p.vertices()[f.index]).norm();
+    case Feature::Type::kEdge: {
+      const Edge& e = p.edges()[f.index];
+      return SegmentSegmentDistance(local, local, p.vertices()[e.v0], p.vertices()[e.v1]);
+    }
+    case Feature::Type::kFace:
+      return std::abs(p.faces()[f.index].normal.dot(local) - p.faces()[f.index].offset);
+  }
+  return 0.0;
+}
+
+// Warm queries, as the simulator makes them: each starts from the cache of the same pair one step
+// (0.1 mm, 0.05 deg) earlier. Most are answered by closest-feature tracking (no GJK iteration);
+// all must match the oracle as the cold ones do, and report points on their features.
+TEST(Distance, WarmQueriesMatchOracleAfterASmallStep) {
+  const ConvexPolyhedron cube = Box(0.045, 0.045, 0.045);
+  const ConvexPolyhedron bar = Box(0.09, 0.045, 0.045);
+  std::mt19937_64 rng(99);
+  int total = 0;
+  for (PoseSet set : {PoseSet::kRandom, PoseSet::kNearParallel, PoseSet::kParallel}) {
+    for (int pair = 0; pair < 2; ++pair) {
+      const ConvexPolyhedron& b = pair == 0 ? cube : bar;
+      const auto poses = MakePoses(cube, b, set, 17000, 3000 + static_cast<int>(set) * 10 + pair);
+      double max_over = 0.0, max_under = 0.0, max_off = 0.0;
+      int tracked = 0;
+      for (const auto& p : poses) {
+        const Pose3 before = Integrate(
+            p.b, Twist{testing::RandomUnit(rng) * 1e-4, testing::RandomUnit(rng) * (0.05 * M_PI / 180.0)}, 1.0);
+        DistanceCache cache;
+        Distance(cube, p.a, b, before, &cache);
+        const DistanceResult d = Distance(cube, p.a, b, p.b, &cache);
+        const double oracle = DistanceBruteForce(cube, p.a, b, p.b);
+        ASSERT_FALSE(d.intersecting);
+        max_over = std::max(max_over, d.distance - oracle);
+        max_under = std::max(max_under, oracle - d.distance);
+        EXPECT_NEAR((d.point_b - d.point_a).norm(), d.upper_bound, 1e-12);
+        max_off = std::max({max_off, OffFeature(cube, p.a, d.feature_a, d.point_a),
+                            OffFeature(b, p.b, d.feature_b, d.point_b)});
+        tracked += d.iterations == 0 ? 1 : 0;
+        ++total;
+      }
+      std::printf("warm set %d pair %d: max over-estimate %.3g m, max under-estimate %.3g m, %d of %zu by "
+                  "feature tracking, points off their features by <= %.3g m\n",
+                  static_cast<int>(set), pair, max_over, max_under, tracked, poses.size(), max_off);
+      EXPECT_LE(max_over, 1e-9);
+      EXPECT_LE(max_under, 1e-9);
+      EXPECT_LE(max_off, 1e-9);
+      EXPECT_GT(tracked, static_cast<int>(poses.size()) / 2) << "feature tracking answers most warm queries";
+    }
+  }
+  EXPECT_GE(total, 100000);
+}
+
+// A cache carried across unrelated poses (a stale or foreign start) still gives the exact answer:
+// the tracked features are certified, never trusted.
+TEST(Distance, StaleCachesStillMatchOracle) {
+  const ConvexPolyhedron cube = Box(0.045, 0.045, 0.045);
+  const ConvexPolyhedron bar = Box(0.09, 0.045, 0.045);
+  for (PoseSet set : {PoseSet::kRandom, PoseSet::kNearParallel, PoseSet::kParallel}) {
+    Stats s = Check(cube, bar, MakePoses(cube, bar, set, 5000, 4000 + static_cast<int>(set)), /*warm=*/true);
+    EXPECT_LE(s.max_over, 1e-9) << "set " << static_cast<int>(set);
+    EXPECT_LE(s.max_under, 1e-9) << "set " << static_cast<int>(set);
+  }
+}
+
 TEST(Distance, ConvexConvexMatchesOracle) {
   std::mt19937_64 rng(7);
   int total = 0;

@@ -1,5 +1,7 @@
 // Exact distance between convex polyhedra (GJK with a separating-plane certificate), closest
-// points and closest features, warm-started from the previous query of the same pair.
+// points and closest features, warm-started from the previous query of the same pair. Two
+// boxes first try the previous query's closest features (I-COLLIDE's tracking, paper §5.1, with
+// a face-face step for nearly parallel faces), accepted only under the same certificate.
 //
 // The reported distance is the certified lower bound of the separating plane found by GJK,
 // and GJK runs until that bound is within kDistanceTolerance of the distance between the two
@@ -34,16 +36,18 @@ struct DistanceResult {
   Eigen::Vector3d point_b = Eigen::Vector3d::Zero();  // world, on B
   Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();  // world, unit, from A toward B
   Feature feature_a, feature_b;
-  int iterations = 0;
+  int iterations = 0;  // GJK iterations; 0 when closest-feature tracking answered a warm query
   bool exhaustive = false;  // GJK's certificate stayed open and the exhaustive pass decided
 };
 
-// Per-pair state carried between queries (temporal coherence, as I-COLLIDE): the support
-// vertices of the last simplex. Zero-initialised means "cold".
+// Per-pair state carried between queries (temporal coherence, as I-COLLIDE, paper §5.1): the
+// support vertices of the last simplex and the closest features they span. Zero-initialised
+// means "cold".
 struct DistanceCache {
   std::array<std::int16_t, 4> index_a{};
   std::array<std::int16_t, 4> index_b{};
   std::int8_t count = 0;
+  Feature feature_a, feature_b;  // spanned by index_a / index_b[0 .. count)
 };
 
 // a and b are in their body frames, placed by world_T_a and world_T_b. `cache` may be null.
