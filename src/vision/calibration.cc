@@ -12,6 +12,8 @@
 #include <opencv2/imgproc.hpp>
 #include <set>
 
+#include "sampling.h"
+
 namespace teachsim::vision {
 
 namespace {
@@ -429,17 +431,6 @@ double AngleDiff(double a, double b) {  // between two directions mod pi
   return std::min(d, M_PI - d);
 }
 
-float Bilinear(const cv::Mat& m, double x, double y) {
-  x = std::clamp(x, 0.0, m.cols - 1.001);
-  y = std::clamp(y, 0.0, m.rows - 1.001);
-  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  const double fx = x - x0, fy = y - y0;
-  const float* r0 = m.ptr<float>(y0);
-  const float* r1 = m.ptr<float>(y0 + 1);
-  return static_cast<float>((1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
-                            fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]));
-}
-
 // Weighted total least squares over `members`; false when degenerate.
 bool FitLine(const std::vector<EdgePoint>& points, EdgeLine& line) {
   double w_sum = 0;
@@ -608,8 +599,8 @@ SnapResult SnapToCorner(const cv::Mat& gray, const Camera& camera, const Eigen::
       if (m0 < threshold) continue;
       if ((Eigen::Vector2d(x, y) - click_in_patch).squaredNorm() > window2) continue;
       const Eigen::Vector2d n = Eigen::Vector2d(gx.at<float>(y, x), gy.at<float>(y, x)) / m0;
-      const double minus = Bilinear(magnitude, x - n.x(), y - n.y());
-      const double plus = Bilinear(magnitude, x + n.x(), y + n.y());
+      const double minus = internal::SampleBilinear(magnitude, x - n.x(), y - n.y());
+      const double plus = internal::SampleBilinear(magnitude, x + n.x(), y + n.y());
       if (!(m0 >= minus && m0 > plus)) continue;
       const double curvature = minus - 2 * m0 + plus;
       const double delta = curvature < 0 ? std::clamp(0.5 * (minus - plus) / curvature, -0.5, 0.5) : 0.0;
@@ -650,8 +641,8 @@ SnapResult SnapToCorner(const cv::Mat& gray, const Camera& camera, const Eigen::
     for (int i : line.members) {
       const EdgePoint& e = points[static_cast<std::size_t>(i)];
       const Eigen::Vector2d q = e.pixel - origin;
-      sum += Bilinear(patch, q.x() + step_px * e.normal.x(), q.y() + step_px * e.normal.y()) -
-             Bilinear(patch, q.x() - step_px * e.normal.x(), q.y() - step_px * e.normal.y());
+      sum += internal::SampleBilinear(patch, q.x() + step_px * e.normal.x(), q.y() + step_px * e.normal.y()) -
+             internal::SampleBilinear(patch, q.x() - step_px * e.normal.x(), q.y() - step_px * e.normal.y());
     }
     return line.members.empty() ? 0.0 : sum / static_cast<double>(line.members.size());
   };

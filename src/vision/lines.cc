@@ -7,21 +7,11 @@
 
 #include "teachsim/vision/recognition_stages.h"
 
+#include "sampling.h"
+
 namespace teachsim::vision {
 
 namespace {
-
-// Bilinear sample of a CV_32F image (clamped).
-float Sample(const cv::Mat& m, double x, double y) {
-  x = std::clamp(x, 0.0, m.cols - 1.001);
-  y = std::clamp(y, 0.0, m.rows - 1.001);
-  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  const double fx = x - x0, fy = y - y0;
-  const float* r0 = m.ptr<float>(y0);
-  const float* r1 = m.ptr<float>(y0 + 1);
-  return static_cast<float>((1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
-                            fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]));
-}
 
 // 8-connected chains of edge pixels; each pixel belongs to one chain.
 std::vector<std::vector<cv::Point>> TraceChains(const cv::Mat& edges) {
@@ -203,8 +193,8 @@ LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& came
       Eigen::Vector2d pixel(p.x, p.y);
       if (m0 > 0) {
         const Eigen::Vector2d g(gx / m0, gy / m0);
-        const double mm = Sample(magnitude, p.x - g.x(), p.y - g.y());
-        const double mp = Sample(magnitude, p.x + g.x(), p.y + g.y());
+        const double mm = internal::SampleBilinear(magnitude, p.x - g.x(), p.y - g.y());
+        const double mp = internal::SampleBilinear(magnitude, p.x + g.x(), p.y + g.y());
         const double denom = mm - 2.0 * m0 + mp;
         if (denom < 0) pixel += g * std::clamp(0.5 * (mm - mp) / denom, -0.5, 0.5);
       }

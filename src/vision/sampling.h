@@ -1,0 +1,23 @@
+#pragma once
+// Private to the vision module: sub-pixel image sampling shared by the line detector and the
+// calibration's corner snapping.
+
+#include <algorithm>
+
+#include <opencv2/core.hpp>
+
+namespace teachsim::vision::internal {
+
+// Bilinear sample of a CV_32F image at (x, y) in pixels, clamped to the image.
+inline float SampleBilinear(const cv::Mat& m, double x, double y) {
+  x = std::clamp(x, 0.0, m.cols - 1.001);
+  y = std::clamp(y, 0.0, m.rows - 1.001);
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const double fx = x - x0, fy = y - y0;
+  const float* r0 = m.ptr<float>(y0);
+  const float* r1 = m.ptr<float>(y0 + 1);
+  return static_cast<float>((1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
+                            fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]));
+}
+
+}  // namespace teachsim::vision::internal
