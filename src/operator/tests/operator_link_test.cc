@@ -96,6 +96,14 @@ TEST(OperatorLink, LinkCutMidExecutionStopsTheRobotAndReconnectResynchronises) {
   worksite::WorksiteStats stats = site->stats();
   EXPECT_TRUE(stats.latched);
   EXPECT_TRUE(stats.last_stop_during_execution);
+  // The aborted program's report is sent once the execution thread has wound down (slow under the
+  // sanitizers): reconnect after it, so that what the new session gets is replayed state.
+  const auto wound_down = std::chrono::steady_clock::now();
+  while (!site->stats().last_report_program && std::chrono::steady_clock::now() - wound_down < std::chrono::seconds(10)) {
+    first->loop.RunFor(std::chrono::milliseconds(10));
+  }
+  ASSERT_TRUE(site->stats().last_report_program.has_value()) << "the stopped program never reported";
+  first->loop.RunFor(std::chrono::milliseconds(300));  // the service's loop broadcasts the report it posted
   first.reset();
 
   // Reconnect: the whole state within 1 s.
