@@ -15,6 +15,7 @@
 #include <set>
 #include <sstream>
 
+#include "teachsim/base/binary_io.h"
 #include "teachsim/base/json.h"
 #include "teachsim/vision/evaluate.h"
 #include "teachsim/vision/recognition_stages.h"
@@ -321,14 +322,8 @@ uint64_t IndexKey(const ModelLibrary& library, const RecognizerOptions& options)
   return h;
 }
 
-template <typename T>
-void Put(std::string* out, const T& value) {
-  out->append(reinterpret_cast<const char*>(&value), sizeof(T));
-}
-template <typename T>
-bool Get(std::istream& in, T* value) {
-  return static_cast<bool>(in.read(reinterpret_cast<char*>(value), sizeof(T)));
-}
+using binary::Get;
+using binary::Put;
 
 constexpr char kMagic[8] = {'T', 'S', 'R', 'I', 'N', 'D', 'E', 'X'};
 

@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 
+#include "teachsim/base/binary_io.h"
 #include "teachsim/base/json.h"
 #include "teachsim/worksite/render.h"
 
@@ -56,15 +57,8 @@ Eigen::Quaterniond LookAtObject(const Eigen::Vector3d& view) {
   return Eigen::Quaterniond(object_R_camera.transpose());
 }
 
-template <typename T>
-void Put(std::string* out, const T& value) {
-  out->append(reinterpret_cast<const char*>(&value), sizeof(T));
-}
-
-template <typename T>
-bool Get(std::istream& in, T* value) {
-  return static_cast<bool>(in.read(reinterpret_cast<char*>(value), sizeof(T)));
-}
+using binary::Get;
+using binary::Put;
 
 }  // namespace
 
