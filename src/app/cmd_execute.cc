@@ -156,7 +156,7 @@ void AddExecuteCommand(CLI::App& app, Runner* run) {
   sub->add_option("--contact-speed", a->contact_speed_mps,
                   "ablation: run every contact move at this speed (m/s; the approach speed into contact; the "
                   "safety limit is 0.05)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(0.0001, 0.05));
   sub->add_option("--frames", a->frames,
                   "write camera images of the executing world (robot included) to this folder, with frames.json");
   sub->add_option("--frame-period", a->frame_period_s, "simulated seconds between frames")->capture_default_str();
