@@ -255,13 +255,22 @@ Result<std::vector<PointCorrespondence>> ParsePointCorrespondences(const json::J
     std::vector<PointCorrespondence> out;
     for (std::size_t i = 0; i < points.Size(); ++i) {
       const json::Reader p = points.Index(i);
-      p.RejectUnknownKeys({"name", "pixel", "world"});
+      p.RejectUnknownKeys({"name", "pixel", "world", "edges"});
       PointCorrespondence c;
       c.name = p.Has("name") ? p.At("name").NonEmptyString() : "point " + std::to_string(i);
       const json::Reader pixel = p.At("pixel");
       pixel.ExpectSize(2);
       c.pixel = {pixel.Index(0).Number(), pixel.Index(1).Number()};
       c.p_in_world = p.At("world").Vector3();
+      if (p.Has("edges")) {
+        const json::Reader edges = p.At("edges");
+        for (std::size_t e = 0; e < edges.Size(); ++e) {
+          const Eigen::Vector3d edge = edges.Index(e).Vector3();
+          if (!(edge.norm() > 1e-6))
+            edges.Index(e).Fail("an edge needs a length > 1e-6 m (direction x length)");
+          c.edges_in_world.push_back(edge);
+        }
+      }
       out.push_back(std::move(c));
     }
     if (out.size() < 4)
@@ -282,6 +291,11 @@ json::Json PointCorrespondencesToJson(const std::vector<PointCorrespondence>& po
     json::Json entry{{"pixel", {p.pixel.x(), p.pixel.y()}},
                      {"world", {p.p_in_world.x(), p.p_in_world.y(), p.p_in_world.z()}}};
     if (!p.name.empty()) entry["name"] = p.name;
+    if (!p.edges_in_world.empty()) {
+      json::Json edges = json::Json::array();
+      for (const Eigen::Vector3d& e : p.edges_in_world) edges.push_back({e.x(), e.y(), e.z()});
+      entry["edges"] = std::move(edges);
+    }
     list.push_back(std::move(entry));
   }
   return {{"points", list}};
@@ -292,15 +306,24 @@ Status ExtrinsicsOptions::Validate() const {
     return Status::InvalidInput("extrinsics: click sigma must be > 0 px, got " +
                                 json::FormatNumber(click_sigma_px));
   }
+  if (!(drop_beyond_sigmas >= 0) || !std::isfinite(drop_beyond_sigmas)) {
+    return Status::InvalidInput("extrinsics: drop_beyond_sigmas must be >= 0 (0: keep all points), got " +
+                                json::FormatNumber(drop_beyond_sigmas));
+  }
   return Status::Ok();
 }
 
-Result<Eigen::Matrix3d> PredictedPositionCovariance(const Camera& camera,
-                                                    const std::vector<Eigen::Vector3d>& points_in_world,
-                                                    double sigma_px) {
-  if (!(sigma_px > 0) || !std::isfinite(sigma_px)) {
-    return Status::InvalidInput("extrinsics: pixel sigma must be > 0 px, got " +
-                                json::FormatNumber(sigma_px));
+namespace {
+
+// PredictedPositionCovariance with a sigma per point.
+Result<Eigen::Matrix3d> PositionCovariance(const Camera& camera,
+                                           const std::vector<Eigen::Vector3d>& points_in_world,
+                                           const std::vector<double>& sigmas_px) {
+  for (const double sigma_px : sigmas_px) {
+    if (!(sigma_px > 0) || !std::isfinite(sigma_px)) {
+      return Status::InvalidInput("extrinsics: pixel sigma must be > 0 px, got " +
+                                  json::FormatNumber(sigma_px));
+    }
   }
   if (points_in_world.size() < 3) {
     return Status::InvalidInput("extrinsics: the pose needs at least 3 points, got " +
@@ -330,7 +353,7 @@ Result<Eigen::Matrix3d> PredictedPositionCovariance(const Camera& camera,
       if (!a || !b) {
         return Status::InvalidInput("extrinsics: point " + std::to_string(i) + " lies behind the camera");
       }
-      jacobian.block<2, 1>(2 * static_cast<Eigen::Index>(i), k) = (*a - *b) / (2 * step);
+      jacobian.block<2, 1>(2 * static_cast<Eigen::Index>(i), k) = (*a - *b) / (2 * step * sigmas_px[i]);
     }
   }
   const Eigen::Matrix<double, 6, 6> information = jacobian.transpose() * jacobian;
@@ -341,9 +364,75 @@ Result<Eigen::Matrix3d> PredictedPositionCovariance(const Camera& camera,
   if (ldlt.info() != Eigen::Success || eigen.eigenvalues()(0) <= 1e-12 * eigen.eigenvalues()(5)) {
     return Status::InvalidInput("extrinsics: the points do not determine the camera's pose (collinear?)");
   }
-  const Eigen::Matrix<double, 6, 6> covariance =
-      sigma_px * sigma_px * ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity());
+  const Eigen::Matrix<double, 6, 6> covariance = ldlt.solve(Eigen::Matrix<double, 6, 6>::Identity());
   return Eigen::Matrix3d(covariance.topLeftCorner<3, 3>());
+}
+
+// Levenberg-Marquardt on the reprojection error weighted by 1 / sigma_i^2, from (rvec, tvec);
+// cv::solvePnPRefineLM has no weights.
+void RefineWeighted(const std::vector<cv::Point3d>& world, const std::vector<cv::Point2d>& pixels,
+                    const std::vector<double>& weights, const cv::Mat& k, const cv::Mat& dist, cv::Mat& rvec,
+                    cv::Mat& tvec) {
+  auto cost_of = [&](const cv::Mat& r, const cv::Mat& t) {
+    std::vector<cv::Point2d> projected;
+    cv::projectPoints(world, r, t, k, dist, projected);
+    double cost = 0;
+    for (std::size_t i = 0; i < world.size(); ++i) {
+      const cv::Point2d d = projected[i] - pixels[i];
+      cost += weights[i] * (d.x * d.x + d.y * d.y);
+    }
+    return cost;
+  };
+  double lambda = 1e-3;
+  double cost = cost_of(rvec, tvec);
+  for (int iteration = 0; iteration < 100; ++iteration) {
+    std::vector<cv::Point2d> projected;
+    cv::Mat jacobian;
+    cv::projectPoints(world, rvec, tvec, k, dist, projected, jacobian);
+    Eigen::Matrix<double, 6, 6> a = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 1> g = Eigen::Matrix<double, 6, 1>::Zero();
+    for (std::size_t i = 0; i < world.size(); ++i) {
+      for (int row = 0; row < 2; ++row) {
+        Eigen::Matrix<double, 6, 1> j;
+        for (int c = 0; c < 6; ++c) j(c) = jacobian.at<double>(static_cast<int>(2 * i) + row, c);
+        const double r = row == 0 ? projected[i].x - pixels[i].x : projected[i].y - pixels[i].y;
+        a += weights[i] * j * j.transpose();
+        g += weights[i] * j * r;
+      }
+    }
+    bool improved = false;
+    for (int attempt = 0; attempt < 10 && !improved; ++attempt) {
+      Eigen::Matrix<double, 6, 6> damped = a;
+      damped.diagonal() *= 1 + lambda;
+      const Eigen::Matrix<double, 6, 1> delta = -damped.ldlt().solve(g);
+      cv::Mat r = rvec.clone(), t = tvec.clone();
+      for (int c = 0; c < 3; ++c) {
+        r.at<double>(c) += delta(c);
+        t.at<double>(c) += delta(c + 3);
+      }
+      const double next = cost_of(r, t);
+      if (next < cost) {
+        improved = true;
+        rvec = r;
+        tvec = t;
+        const bool converged = cost - next < 1e-14 * (1 + cost);
+        cost = next;
+        lambda = std::max(1e-9, lambda / 10);
+        if (converged) return;
+      } else {
+        lambda *= 10;
+      }
+    }
+    if (!improved) return;
+  }
+}
+
+}  // namespace
+
+Result<Eigen::Matrix3d> PredictedPositionCovariance(const Camera& camera,
+                                                    const std::vector<Eigen::Vector3d>& points_in_world,
+                                                    double sigma_px) {
+  return PositionCovariance(camera, points_in_world, std::vector<double>(points_in_world.size(), sigma_px));
 }
 
 Result<ExtrinsicsResult> CalibrateExtrinsics(const Camera& camera,
@@ -353,51 +442,95 @@ Result<ExtrinsicsResult> CalibrateExtrinsics(const Camera& camera,
   if (points.size() < 4) {
     return Status::InvalidInput("extrinsics: needs at least 4 points, got " + std::to_string(points.size()));
   }
-  std::vector<cv::Point3d> world;
-  std::vector<cv::Point2d> pixels;
+  std::vector<double> sigmas;
   for (const PointCorrespondence& p : points) {
     if (!p.pixel.allFinite() || !p.p_in_world.allFinite()) {
       return Status::InvalidInput("extrinsics: point '" + p.name + "' is not finite");
     }
-    world.emplace_back(p.p_in_world.x(), p.p_in_world.y(), p.p_in_world.z());
-    pixels.emplace_back(p.pixel.x(), p.pixel.y());
+    if (!(p.sigma_px >= 0) || !std::isfinite(p.sigma_px)) {
+      return Status::InvalidInput("extrinsics: point '" + p.name + "' has sigma " +
+                                  json::FormatNumber(p.sigma_px) + " px, expected >= 0 (0: the click sigma)");
+    }
+    sigmas.push_back(p.sigma_px > 0 ? p.sigma_px : options.click_sigma_px);
   }
   const cv::Mat k = CameraMatrix(camera.intrinsics());
   const cv::Mat dist = DistCoeffs(camera.distortion());
-  cv::Mat rvec, tvec;
-  try {
-    if (!cv::solvePnP(world, pixels, k, dist, rvec, tvec, false, cv::SOLVEPNP_SQPNP)) {
-      return Status::Failed("extrinsics: PnP found no pose (are the points collinear or mislabelled?)");
-    }
-    cv::solvePnPRefineLM(world, pixels, k, dist, rvec, tvec,
-                         cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-12));
-  } catch (const cv::Exception& e) {
-    return Status::Failed(std::string("extrinsics: OpenCV failed: ") + e.what());
-  }
-  const geometry::Pose3 camera_T_world = PoseFromRvecTvec(rvec, tvec);
+  std::vector<bool> dropped(points.size(), false);
   ExtrinsicsResult result;
-  result.world_T_camera = camera_T_world.Inverse();
-  const Camera solved(camera.intrinsics(), camera.distortion(), result.world_T_camera, camera.width(),
-                      camera.height());
-  double sum = 0;
-  for (const PointCorrespondence& p : points) {
-    auto projected = solved.Project(p.p_in_world);
-    if (!projected) {
-      return Status::Failed("extrinsics: point '" + p.name +
-                            "' lies behind the solved camera (mislabelled points?)");
+  for (;;) {
+    std::vector<cv::Point3d> world;
+    std::vector<cv::Point2d> pixels;
+    std::vector<double> weights;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      if (dropped[i]) continue;
+      const PointCorrespondence& p = points[i];
+      world.emplace_back(p.p_in_world.x(), p.p_in_world.y(), p.p_in_world.z());
+      pixels.emplace_back(p.pixel.x(), p.pixel.y());
+      weights.push_back(1 / (sigmas[i] * sigmas[i]));
     }
-    const double r = (*projected - p.pixel).norm();
-    result.residuals_px.push_back(r);
-    sum += r * r;
+    cv::Mat rvec, tvec;
+    try {
+      if (!cv::solvePnP(world, pixels, k, dist, rvec, tvec, false, cv::SOLVEPNP_SQPNP)) {
+        return Status::Failed("extrinsics: PnP found no pose (are the points collinear or mislabelled?)");
+      }
+      cv::solvePnPRefineLM(world, pixels, k, dist, rvec, tvec,
+                           cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 100, 1e-12));
+      if (*std::min_element(weights.begin(), weights.end()) !=
+          *std::max_element(weights.begin(), weights.end())) {
+        RefineWeighted(world, pixels, weights, k, dist, rvec, tvec);
+      }
+    } catch (const cv::Exception& e) {
+      return Status::Failed(std::string("extrinsics: OpenCV failed: ") + e.what());
+    }
+    const geometry::Pose3 camera_T_world = PoseFromRvecTvec(rvec, tvec);
+    result = ExtrinsicsResult{};
+    result.world_T_camera = camera_T_world.Inverse();
+    result.dropped = dropped;
+    const Camera solved(camera.intrinsics(), camera.distortion(), result.world_T_camera, camera.width(),
+                        camera.height());
+    double sum = 0;
+    int used = 0;
+    std::size_t worst = points.size();
+    double worst_ratio = 0;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const PointCorrespondence& p = points[i];
+      auto projected = solved.Project(p.p_in_world);
+      if (!projected) {
+        return Status::Failed("extrinsics: point '" + p.name +
+                              "' lies behind the solved camera (mislabelled points?)");
+      }
+      const double r = (*projected - p.pixel).norm();
+      result.residuals_px.push_back(r);
+      if (dropped[i]) continue;
+      sum += r * r;
+      ++used;
+      // The residual of a point is smaller than its error (the pose follows it), so compare with
+      // its sigma per coordinate times sqrt(2) for the distance.
+      const double ratio = r / (std::sqrt(2.0) * sigmas[i]);
+      if (r > 1 && ratio > worst_ratio) {
+        worst_ratio = ratio;
+        worst = i;
+      }
+    }
+    result.rms_px = std::sqrt(sum / static_cast<double>(used));
+    std::vector<Eigen::Vector3d> in_world;
+    std::vector<double> used_sigmas;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      if (dropped[i]) continue;
+      in_world.push_back(points[i].p_in_world);
+      used_sigmas.push_back(sigmas[i]);
+    }
+    auto covariance = PositionCovariance(solved, in_world, used_sigmas);
+    if (!covariance.ok()) return covariance.status();
+    result.position_covariance_m2 = *covariance;
+    result.position_sigma_m = std::sqrt(covariance->trace());
+    if (options.drop_beyond_sigmas > 0 && worst < points.size() && worst_ratio > options.drop_beyond_sigmas &&
+        used > 5) {
+      dropped[worst] = true;
+      continue;
+    }
+    return result;
   }
-  result.rms_px = std::sqrt(sum / static_cast<double>(points.size()));
-  std::vector<Eigen::Vector3d> in_world;
-  for (const PointCorrespondence& p : points) in_world.push_back(p.p_in_world);
-  auto covariance = PredictedPositionCovariance(solved, in_world, options.click_sigma_px);
-  if (!covariance.ok()) return covariance.status();
-  result.position_covariance_m2 = *covariance;
-  result.position_sigma_m = std::sqrt(covariance->trace());
-  return result;
 }
 
 }  // namespace teachsim::vision
@@ -537,6 +670,14 @@ Status SnapOptions::Validate() const {
   if (min_edge_points < 3) {
     return Status::InvalidInput("SnapOptions::min_edge_points = " + std::to_string(min_edge_points) +
                                 " must be >= 3");
+  }
+  if (!(band_px >= 1.5 && band_px <= 10) || !(edge_length_px >= 4 && edge_length_px <= 60) ||
+      !(max_turn_rad > 0 && max_turn_rad < 0.5)) {
+    return Status::InvalidInput(
+        "SnapOptions: band_px must be in [1.5, 10] px, edge_length_px in [4, 60] px and "
+        "max_turn_rad in (0, 0.5), got " +
+        json::FormatNumber(band_px) + ", " + json::FormatNumber(edge_length_px) + ", " +
+        json::FormatNumber(max_turn_rad));
   }
   if (!(min_edge_angle_rad > 0 && min_edge_angle_rad < M_PI / 2)) {
     return Status::InvalidInput("SnapOptions::min_edge_angle_rad = " +
@@ -826,14 +967,439 @@ SnapResult SnapToCorner(const cv::Mat& gray, const Camera& camera, const Eigen::
 
 std::vector<SnapResult> SnapCorrespondences(const cv::Mat& gray, const Camera& camera,
                                             std::vector<PointCorrespondence>& points,
-                                            const SnapOptions& options) {
+                                            const SnapOptions& options, double click_sigma_px) {
   std::vector<SnapResult> results;
   results.reserve(points.size());
+  const std::vector<PointCorrespondence> clicked = points;
+  if (options.method == SnapMethod::kEdgeLines && options.use_model && points.size() >= 4) {
+    ExtrinsicsOptions first;
+    first.click_sigma_px = click_sigma_px > 0 ? click_sigma_px : 0.5;
+    std::vector<PointCorrespondence> current = clicked;
+    for (PointCorrespondence& p : current) p.sigma_px = 0;
+    bool guided = false;
+    // Twice: the pose from the clicks, then the one from the snapped points, predicts the edges.
+    for (int round = 0; round < 2; ++round) {
+      auto pose = CalibrateExtrinsics(camera, current, first);
+      if (!pose.ok()) break;
+      const Camera posed(camera.intrinsics(), camera.distortion(), pose->world_T_camera, camera.width(),
+                         camera.height());
+      std::vector<SnapResult> round_results;
+      for (std::size_t i = 0; i < clicked.size(); ++i) {
+        round_results.push_back(SnapToModelCorner(gray, posed, clicked[i], options));
+        current[i].pixel = round_results.back().pixel;
+        current[i].sigma_px =
+            round_results.back().snapped ? std::max(round_results.back().sigma_px, 0.02) : 0;
+      }
+      results = std::move(round_results);
+      guided = true;
+    }
+    if (guided) {
+      points = current;
+      return results;
+    }
+    results.clear();
+  }
   for (PointCorrespondence& p : points) {
     results.push_back(SnapToCorner(gray, camera, p.pixel, options));
     p.pixel = results.back().pixel;
+    if (results.back().snapped && results.back().sigma_px > 0)
+      p.sigma_px = std::max(results.back().sigma_px, 0.02);
   }
   return results;
+}
+
+}  // namespace teachsim::vision
+
+// ---------------------------------------------------------------------------------------------
+// Model-guided snapping: blurred steps fitted along the predicted edges.
+
+namespace teachsim::vision {
+
+namespace {
+
+// The pixels around a point: gray levels and their undistorted (ideal) positions, where straight
+// world edges are straight lines.
+struct IdealPatch {
+  cv::Rect roi;
+  cv::Mat values;                      // CV_32F, the raw gray levels (no smoothing: the fit models the blur)
+  std::vector<Eigen::Vector2d> ideal;  // row-major over roi
+};
+
+// The ideal positions come from a grid of exact undistortions every 4 px, interpolated bilinearly
+// (the lens model's curvature makes that good to ~0.002 px), which keeps a patch cheap.
+std::optional<IdealPatch> MakeIdealPatch(const cv::Mat& gray, const Camera& camera,
+                                         const Eigen::Vector2d& centre, int radius) {
+  IdealPatch patch;
+  const int cu = static_cast<int>(std::lround(centre.x())), cv_ = static_cast<int>(std::lround(centre.y()));
+  patch.roi = cv::Rect(cu - radius, cv_ - radius, 2 * radius + 1, 2 * radius + 1) &
+              cv::Rect(0, 0, gray.cols, gray.rows);
+  if (patch.roi.width < 8 || patch.roi.height < 8) return std::nullopt;
+  gray(patch.roi).convertTo(patch.values, CV_32F);
+  constexpr int kStep = 4;
+  const int gw = patch.roi.width / kStep + 2, gh = patch.roi.height / kStep + 2;
+  std::vector<Eigen::Vector2d> grid(static_cast<std::size_t>(gw * gh));
+  for (int j = 0; j < gh; ++j) {
+    for (int i = 0; i < gw; ++i) {
+      auto ideal = camera.UndistortPixel(Eigen::Vector2d(patch.roi.x + i * kStep, patch.roi.y + j * kStep));
+      if (!ideal) return std::nullopt;
+      grid[static_cast<std::size_t>(j * gw + i)] = *ideal;
+    }
+  }
+  patch.ideal.resize(static_cast<std::size_t>(patch.roi.area()));
+  for (int y = 0; y < patch.roi.height; ++y) {
+    const int j = y / kStep;
+    const double fy = static_cast<double>(y - j * kStep) / kStep;
+    for (int x = 0; x < patch.roi.width; ++x) {
+      const int i = x / kStep;
+      const double fx = static_cast<double>(x - i * kStep) / kStep;
+      auto at = [&](int a, int b) { return grid[static_cast<std::size_t>(b * gw + a)]; };
+      patch.ideal[static_cast<std::size_t>(y * patch.roi.width + x)] =
+          (1 - fy) * ((1 - fx) * at(i, j) + fx * at(i + 1, j)) +
+          fy * ((1 - fx) * at(i, j + 1) + fx * at(i + 1, j + 1));
+    }
+  }
+  return patch;
+}
+
+double NormalCdf(double u) { return 0.5 * std::erfc(-u / std::sqrt(2.0)); }
+double NormalPdf(double u) { return std::exp(-0.5 * u * u) / std::sqrt(2 * M_PI); }
+
+// A straight edge predicted from the model: from `corner` (ideal px) along unit `direction`.
+struct PredictedEdge {
+  Eigen::Vector2d direction{1, 0};
+  double length_px = 1e9;  // how far the edge runs straight in the image
+  double r_min = 3, r_max = 17;
+};
+
+// The fitted step: the line n . x = c (ideal px) with the profile a + b Phi((n . x - c) / s).
+struct StepFit {
+  bool ok = false;
+  Eigen::Vector2d normal{1, 0};
+  double c = 0;
+  double a = 0, b = 0, s = 1;
+  double turn_rad = 0;     // from the predicted direction
+  Eigen::Vector2d centre;  // the band's centre on the line
+  double offset_var = 0, slope_var = 0;
+  double rms = 0;
+  int pixels = 0;
+};
+
+// Fits a blurred step to the pixels of `patch` in the band along `edge` from `corner`: offset
+// `start_offset` from the predicted line, +-half_width across it. The two faces' brightnesses may
+// each vary linearly (shading across a face, the table's mottle, a face's grain on average):
+// constants would turn and shift the line to absorb such a slope. Damped Gauss-Newton over the six
+// brightness terms, the line's offset and turn and the blur; the line is parameterized about the
+// band's centre so that offset and turn are nearly independent.
+StepFit FitStep(const IdealPatch& patch, const Eigen::Vector2d& corner, const PredictedEdge& edge,
+                double start_offset, double half_width, int iterations, bool free_turn) {
+  StepFit fit;
+  const Eigen::Vector2d t0 = edge.direction, n0(-t0.y(), t0.x());
+  const Eigen::Vector2d centre = corner + t0 * 0.5 * (edge.r_min + edge.r_max);
+  const double half_length = std::max(1.0, 0.5 * (edge.r_max - edge.r_min));
+  std::vector<Eigen::Vector2d> xs;
+  std::vector<double> vs;
+  for (int y = 0; y < patch.roi.height; ++y) {
+    for (int x = 0; x < patch.roi.width; ++x) {
+      const Eigen::Vector2d q = patch.ideal[static_cast<std::size_t>(y * patch.roi.width + x)] - corner;
+      const double along = t0.dot(q), across = n0.dot(q) - start_offset;
+      if (along < edge.r_min || along > edge.r_max || std::abs(across) > half_width) continue;
+      xs.push_back(q + corner - centre);
+      vs.push_back(patch.values.at<float>(y, x));
+    }
+  }
+  const int n = static_cast<int>(xs.size());
+  constexpr int kParams =
+      9;  // dark side a0 a_along a_across, bright side b0 b_along b_across, offset, turn, blur
+  using Vector = Eigen::Matrix<double, kParams, 1>;
+  using Matrix = Eigen::Matrix<double, kParams, kParams>;
+  if (n < 30) return fit;
+  Vector p = Vector::Zero();
+  p(6) = start_offset;
+  p(8) = 1.0;
+  {  // Start: no slopes, no turn, blur 1 px, the two brightnesses by linear least squares.
+    Eigen::Matrix2d m = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d r = Eigen::Vector2d::Zero();
+    for (int i = 0; i < n; ++i) {
+      const double phi = NormalCdf(n0.dot(xs[static_cast<std::size_t>(i)]) - start_offset);
+      const Eigen::Vector2d f(1 - phi, phi);
+      m += f * f.transpose();
+      r += f * vs[static_cast<std::size_t>(i)];
+    }
+    if (std::abs(m.determinant()) < 1e-9) return fit;
+    const Eigen::Vector2d ab = m.ldlt().solve(r);
+    p(0) = ab(0);
+    p(3) = ab(1);
+  }
+  auto evaluate = [&](const Vector& q, Matrix* jtj, Vector* jtr) {
+    const Eigen::Vector2d nn = std::cos(q(7)) * n0 + std::sin(q(7)) * t0;
+    const Eigen::Vector2d dn = -std::sin(q(7)) * n0 + std::cos(q(7)) * t0;
+    double sse = 0;
+    if (jtj) {
+      jtj->setZero();
+      jtr->setZero();
+    }
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector2d& x = xs[static_cast<std::size_t>(i)];
+      const double along = t0.dot(x) / half_length, across = n0.dot(x) / half_width;
+      const double dark = q(0) + q(1) * along + q(2) * across;
+      const double bright = q(3) + q(4) * along + q(5) * across;
+      const double u = (nn.dot(x) - q(6)) / q(8);
+      const double cdf = NormalCdf(u), pdf = NormalPdf(u);
+      const double r = dark + (bright - dark) * cdf - vs[static_cast<std::size_t>(i)];
+      sse += r * r;
+      if (jtj) {
+        const double k = (bright - dark) * pdf / q(8);
+        Vector j;
+        j << 1 - cdf, (1 - cdf) * along, (1 - cdf) * across, cdf, cdf * along, cdf * across, -k,
+            k * dn.dot(x), -k * u;
+        jtj->selfadjointView<Eigen::Lower>().rankUpdate(j);
+        *jtr += j * r;
+      }
+    }
+    if (jtj) *jtj = jtj->selfadjointView<Eigen::Lower>();
+    return sse;
+  };
+  Matrix jtj;
+  Vector jtr;
+  double sse = evaluate(p, &jtj, &jtr);
+  double lambda = 1e-3;
+  for (int iteration = 0; iteration < iterations; ++iteration) {
+    bool improved = false;
+    for (int attempt = 0; attempt < 8 && !improved; ++attempt) {
+      Matrix damped = jtj;
+      for (int d = 0; d < kParams; ++d) damped(d, d) += lambda * std::max(jtj(d, d), 1e-9);
+      if (!free_turn) {  // the predicted direction held: the offset alone is found first
+        damped.row(7).setZero();
+        damped.col(7).setZero();
+        damped(7, 7) = 1;
+      }
+      Vector step = damped.ldlt().solve(jtr);
+      if (!free_turn) step(7) = 0;
+      Vector next = p - step;
+      next(8) = std::clamp(next(8), 0.3, 4.0);
+      // The band is placed about the start: a line that leaves it fits something else.
+      next(6) = std::clamp(next(6), start_offset - 2, start_offset + 2);
+      next(7) = std::clamp(next(7), -0.15, 0.15);
+      const double next_sse = evaluate(next, nullptr, nullptr);
+      if (std::isfinite(next_sse) && next_sse < sse) {
+        improved = true;
+        const bool converged = sse - next_sse < 1e-10 * sse;
+        p = next;
+        sse = evaluate(p, &jtj, &jtr);
+        lambda = std::max(1e-7, lambda / 10);
+        if (converged) iteration = iterations;
+      } else {
+        lambda *= 10;
+      }
+    }
+    if (!improved) break;
+  }
+  const Eigen::Vector2d nn = std::cos(p(7)) * n0 + std::sin(p(7)) * t0;
+  fit.normal = nn;
+  fit.a = p(0);
+  fit.b = p(3) - p(0);
+  fit.s = p(8);
+  fit.turn_rad = p(7);
+  fit.centre = centre + nn * p(6);
+  fit.c = nn.dot(centre) + p(6);
+  fit.pixels = n;
+  fit.rms = std::sqrt(sse / n);
+  // The residuals include the faces' grain, correlated over a few pixels: the variances from the
+  // normal equations are scaled up by that (kCorrelation pixels per independent sample).
+  constexpr double kCorrelation = 4;
+  const Matrix covariance =
+      sse / std::max(1, n - kParams) * kCorrelation * jtj.ldlt().solve(Matrix::Identity());
+  fit.offset_var = covariance(6, 6);
+  fit.slope_var = covariance(7, 7);
+  fit.ok = std::isfinite(fit.c) && std::isfinite(fit.offset_var) && fit.offset_var >= 0;
+  return fit;
+}
+
+// The offset (from the predicted line) of the strongest step within +-reach, 0.25 px steps: a
+// linear fit of the two brightnesses with a 1 px blur at each offset.
+double CoarseOffset(const IdealPatch& patch, const Eigen::Vector2d& corner, const PredictedEdge& edge,
+                    double reach, double half_width) {
+  const Eigen::Vector2d t0 = edge.direction, n0(-t0.y(), t0.x());
+  std::vector<std::pair<double, double>> samples;  // across, value
+  for (int y = 0; y < patch.roi.height; ++y) {
+    for (int x = 0; x < patch.roi.width; ++x) {
+      const Eigen::Vector2d q = patch.ideal[static_cast<std::size_t>(y * patch.roi.width + x)] - corner;
+      const double along = t0.dot(q), across = n0.dot(q);
+      if (along < edge.r_min || along > edge.r_max || std::abs(across) > reach + half_width) continue;
+      samples.emplace_back(across, patch.values.at<float>(y, x));
+    }
+  }
+  double best = 0, best_step = -1;
+  for (double offset = -reach; offset <= reach + 1e-9; offset += 0.25) {
+    Eigen::Matrix2d m = Eigen::Matrix2d::Zero();
+    Eigen::Vector2d r = Eigen::Vector2d::Zero();
+    for (const auto& [across, value] : samples) {
+      if (std::abs(across - offset) > half_width) continue;
+      const Eigen::Vector2d f(1, NormalCdf(across - offset));
+      m += f * f.transpose();
+      r += f * value;
+    }
+    if (std::abs(m.determinant()) < 1e-6) continue;
+    // Prefer the predicted position among equal steps.
+    const double step = std::abs(m.ldlt().solve(r)(1)) * (1 - 0.02 * std::abs(offset));
+    if (step > best_step) {
+      best_step = step;
+      best = offset;
+    }
+  }
+  return best;
+}
+
+// The ideal pixel of a point in the world (no distortion), nullopt behind the camera.
+std::optional<Eigen::Vector2d> IdealProjection(const Camera& camera, const Eigen::Vector3d& p_in_world) {
+  const Eigen::Vector3d p = camera.camera_T_world() * p_in_world;
+  if (p.z() < 1e-6) return std::nullopt;
+  const Intrinsics& k = camera.intrinsics();
+  return Eigen::Vector2d(k.fx * p.x() / p.z() + k.cx, k.fy * p.y() / p.z() + k.cy);
+}
+
+}  // namespace
+
+SnapResult SnapToModelCorner(const cv::Mat& gray, const Camera& camera, const PointCorrespondence& point,
+                             const SnapOptions& options) {
+  TEACHSIM_CHECK(gray.type() == CV_8UC1);
+  SnapResult result;
+  result.pixel = point.pixel;
+  auto predicted = IdealProjection(camera, point.p_in_world);
+  if (!predicted || !point.pixel.allFinite()) {
+    result.reason = "the point does not project into the image";
+    return result;
+  }
+  // The candidate edges: the given ones, or the six world-axis directions.
+  std::vector<Eigen::Vector3d> edges_3d = point.edges_in_world;
+  if (edges_3d.empty()) {
+    for (int axis = 0; axis < 3; ++axis) {
+      for (const double sign : {1.0, -1.0}) {
+        Eigen::Vector3d d = Eigen::Vector3d::Zero();
+        d(axis) = sign;
+        edges_3d.push_back(d);
+      }
+    }
+  }
+  std::vector<PredictedEdge> candidates;
+  for (const Eigen::Vector3d& e : edges_3d) {
+    const double length_m = e.norm();
+    if (!(length_m > 0)) continue;
+    // The image direction from a short step along the edge (the projection of a straight edge is a
+    // straight line in the ideal image), its length from the far end.
+    auto near = IdealProjection(camera, point.p_in_world + e * std::min(1.0, 1e-3 / length_m));
+    if (!near || (*near - *predicted).norm() < 1e-9) continue;
+    PredictedEdge edge;
+    edge.direction = (*near - *predicted).normalized();
+    if (point.edges_in_world.empty()) {
+      edge.length_px = 1e9;
+    } else if (auto far = IdealProjection(camera, point.p_in_world + e)) {
+      edge.length_px = edge.direction.dot(*far - *predicted);
+    }
+    candidates.push_back(edge);
+  }
+  const double hw = options.band_px, reach = options.max_offset_px;
+  // The junction left out: beyond it the band (+-hw, plus the blur) is clear of the other edges.
+  // Before the edges are known (first pass), candidates within ~20 degrees of each other are not
+  // kept apart: one of such a pair is usually hidden (its faces turned away), and the fit along the
+  // other finds the visible one, or turns too far and is dropped.
+  auto set_range = [&](std::vector<PredictedEdge>& edges, bool found) {
+    for (std::size_t i = 0; i < edges.size(); ++i) {
+      double sine = 1;
+      for (std::size_t j = 0; j < edges.size(); ++j) {
+        if (j == i) continue;
+        const double cosine = edges[i].direction.dot(edges[j].direction);
+        const double sj = std::sqrt(std::max(0.0, 1 - cosine * cosine));
+        if (cosine > 0 && (found || sj > 0.34)) sine = std::min(sine, sj);
+      }
+      edges[i].r_min = std::max(options.junction_px, (hw + 2.5) / std::max(sine, 0.1));
+      edges[i].r_max = std::min(edges[i].r_min + options.edge_length_px, edges[i].length_px - 2.5);
+    }
+  };
+  Eigen::Vector2d corner = *predicted;
+  std::vector<PredictedEdge> edges = candidates;
+  std::vector<StepFit> fits;
+  Eigen::Matrix2d covariance = Eigen::Matrix2d::Zero();
+  for (int pass = 0; pass < 3; ++pass) {
+    set_range(edges, pass > 0);
+    double extent = 0;
+    for (const PredictedEdge& e : edges) extent = std::max(extent, e.r_max);
+    const int radius = static_cast<int>(std::ceil(std::min(extent, 60.0) + hw + reach + 3));
+    const Intrinsics& k = camera.intrinsics();
+    const Eigen::Vector2d corner_pixel =
+        camera.NormalizedToPixel({(corner.x() - k.cx) / k.fx, (corner.y() - k.cy) / k.fy});
+    auto patch = MakeIdealPatch(gray, camera, corner_pixel, radius);
+    if (!patch) {
+      result.reason = "the point lies too close to the image border or beyond the lens model";
+      return result;
+    }
+    std::vector<PredictedEdge> found;
+    fits.clear();
+    for (const PredictedEdge& e : edges) {
+      if (e.r_max - e.r_min < 4) continue;
+      const double start = pass == 0 ? CoarseOffset(*patch, corner, e, reach, hw) : 0.0;
+      StepFit fit = FitStep(*patch, corner, e, start, hw, 30, /*free_turn=*/false);
+      if (!fit.ok) continue;
+      // Once more with the band centred on the fitted line.
+      const double offset = fit.c - fit.normal.dot(corner);
+      if (std::abs(offset) < reach + 1) {
+        PredictedEdge turned = e;
+        turned.direction = Eigen::Vector2d(fit.normal.y(), -fit.normal.x());
+        if (turned.direction.dot(e.direction) < 0) turned.direction = -turned.direction;
+        const Eigen::Vector2d n1(-turned.direction.y(), turned.direction.x());
+        fit = FitStep(*patch, corner, turned, n1.dot(fit.normal) > 0 ? offset : -offset, hw, 30,
+                      /*free_turn=*/true);
+        if (!fit.ok) continue;
+      }
+      const Eigen::Vector2d n0(-e.direction.y(), e.direction.x());
+      fit.turn_rad = std::acos(std::clamp(std::abs(n0.dot(fit.normal)), 0.0, 1.0));
+      const double offset_now = std::abs(fit.c - fit.normal.dot(corner));
+      if (std::abs(fit.b) < options.min_step || std::abs(fit.turn_rad) > options.max_turn_rad ||
+          offset_now > reach || fit.s < 0.5 || fit.s > 2.0) {
+        continue;
+      }
+      found.push_back(e);
+      fits.push_back(fit);
+    }
+    if (fits.size() < 2) {
+      result.reason = fits.empty() ? "no edge of the model found near the point"
+                                   : "only one edge of the model found near the point";
+      return result;
+    }
+    std::vector<EdgeLine> lines;
+    for (const StepFit& f : fits) {
+      EdgeLine l;
+      l.normal = f.normal;
+      l.c = f.c;
+      l.centroid = f.centre;
+      l.offset_var = f.offset_var;
+      l.slope_var = f.slope_var;
+      l.rms_px = f.rms;
+      lines.push_back(l);
+    }
+    Eigen::Vector2d next;
+    if (!IntersectLines(lines, next, covariance, corner)) {
+      result.reason = "the edges found near the point are (nearly) parallel";
+      return result;
+    }
+    corner = next;
+    edges = found;  // the next pass leaves out the junction by the edges that are there
+  }
+  const Intrinsics& k = camera.intrinsics();
+  const Eigen::Vector2d snapped =
+      camera.NormalizedToPixel({(corner.x() - k.cx) / k.fx, (corner.y() - k.cy) / k.fy});
+  const double offset = (snapped - point.pixel).norm();
+  if (!snapped.allFinite() || offset > options.max_offset_px) {
+    result.reason = "the edges meet " + json::FormatNumber(offset) + " px from the click (more than " +
+                    json::FormatNumber(options.max_offset_px) + ")";
+    return result;
+  }
+  result.snapped = true;
+  result.pixel = snapped;
+  result.offset_px = offset;
+  result.sigma_px = std::sqrt(std::max(0.0, covariance.trace() / 2));
+  result.edges = static_cast<int>(fits.size());
+  return result;
 }
 
 }  // namespace teachsim::vision

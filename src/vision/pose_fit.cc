@@ -36,7 +36,7 @@ void Residuals(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K_inv_t, co
     const Eigen::Vector3d p2 = camera_T_object * BoxVertex(size_m, kBoxEdges[static_cast<size_t>(m.edge)][1]);
     // The interpretation plane's normal, mapped to the pixel line through the edge's projection.
     const Eigen::Vector3d l = K_inv_t * p1.cross(p2);
-    const double norm = std::max(std::hypot(l.x(), l.y()), 1e-300);
+    const double norm = std::max(std::sqrt(l.x() * l.x() + l.y() * l.y()), 1e-300);
     (*r)(static_cast<Eigen::Index>(2 * i)) = (l.x() * m.a.x() + l.y() * m.a.y() + l.z()) / norm;
     (*r)(static_cast<Eigen::Index>(2 * i + 1)) = (l.x() * m.b.x() + l.y() * m.b.y() + l.z()) / norm;
   }
@@ -46,9 +46,15 @@ double HuberWeight(double r, double k) { return k <= 0 || std::abs(r) <= k ? 1.0
 
 }  // namespace
 
-FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
-                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
-                         int max_iterations, double huber_px) {
+namespace {
+
+// Levenberg-damped Gauss-Newton with Huber weights over N pose parameters; perturb(pose, delta)
+// applies a parameter step. Shared by the 6-DOF fit and the 3-DOF fit on a support plane.
+template <int N, typename Perturbation>
+FitResult FitLm(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_object_initial,
+                const std::vector<LineMatch>& matches, int max_iterations, double huber_px, Perturbation perturb) {
+  using VectorNd = Eigen::Matrix<double, N, 1>;
+  using MatrixNd = Eigen::Matrix<double, N, N>;
   FitResult out;
   out.camera_T_object = camera_T_object_initial;
   out.covariance_camera.setZero();
@@ -56,7 +62,7 @@ FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K
   const Eigen::Matrix3d K_inv_t = K.inverse().transpose();
   const Eigen::Index m = static_cast<Eigen::Index>(2 * matches.size());
   Eigen::VectorXd r(m), rp(m), rm(m), w(m);
-  Eigen::Matrix<double, Eigen::Dynamic, 6> J(m, 6);
+  Eigen::Matrix<double, Eigen::Dynamic, N> J(m, N);
 
   auto cost = [&](const Eigen::VectorXd& res) {
     double c = 0;
@@ -67,17 +73,16 @@ FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K
     return c;
   };
   auto jacobian = [&](const geometry::Pose3& pose) {
-    // Central differences: 12 evaluations of a handful of residuals, cheaper to write than to
+    // Central differences: 2N evaluations of a handful of residuals, cheaper to write than to
     // get wrong analytically, and exact enough that the fit converges to 1e-9.
-    constexpr double kStepT = 1e-7, kStepR = 1e-7;
-    for (int k = 0; k < 6; ++k) {
-      Vector6d d = Vector6d::Zero();
-      const double h = k < 3 ? kStepT : kStepR;
-      d(k) = h;
-      Residuals(size_m, K_inv_t, Perturb(pose, d), matches, &rp);
-      d(k) = -h;
-      Residuals(size_m, K_inv_t, Perturb(pose, d), matches, &rm);
-      J.col(k) = (rp - rm) / (2 * h);
+    constexpr double kStep = 1e-7;
+    for (int k = 0; k < N; ++k) {
+      VectorNd d = VectorNd::Zero();
+      d(k) = kStep;
+      Residuals(size_m, K_inv_t, perturb(pose, d), matches, &rp);
+      d(k) = -kStep;
+      Residuals(size_m, K_inv_t, perturb(pose, d), matches, &rm);
+      J.col(k) = (rp - rm) / (2 * kStep);
     }
   };
 
@@ -89,16 +94,17 @@ FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K
     out.iterations = it + 1;
     jacobian(pose);
     for (Eigen::Index i = 0; i < m; ++i) w(i) = HuberWeight(r(i), huber_px);
-    const Matrix6d H = J.transpose() * w.asDiagonal() * J;
-    const Vector6d g = J.transpose() * (w.asDiagonal() * r);
+    const MatrixNd H = J.transpose() * w.asDiagonal() * J;
+    const VectorNd g = J.transpose() * (w.asDiagonal() * r);
     bool improved = false;
-    Vector6d step = Vector6d::Zero();
+    const double before = current;
+    VectorNd step = VectorNd::Zero();
     for (int tries = 0; tries < 8 && !improved; ++tries) {
-      Matrix6d A = H;
+      MatrixNd A = H;
       A.diagonal() += lambda * (H.diagonal().array() + 1e-12).matrix();
       step = -A.ldlt().solve(g);
       if (!step.allFinite()) break;
-      const geometry::Pose3 trial = Perturb(pose, step);
+      const geometry::Pose3 trial = perturb(pose, step);
       if (trial.translation.z() <= 1e-4) {  // behind the camera: damp harder
         lambda *= 10;
         continue;
@@ -115,15 +121,40 @@ FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K
         lambda *= 10;
       }
     }
-    if (!improved || (step.head<3>().norm() < 1e-11 && step.tail<3>().norm() < 1e-11)) {
+    // Done when nothing improves, the step vanishes, or the cost no longer falls (noisy lines:
+    // the last iterations of a plateau move the pose by nanometres).
+    if (!improved || step.norm() < 1e-11 || before - current <= 1e-10 * before) {
       out.converged = true;
       break;
     }
   }
   out.camera_T_object = pose;
   out.rms_px = std::sqrt(r.squaredNorm() / static_cast<double>(m));
+  return out;
+}
+
+}  // namespace
+
+FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
+                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
+                         int max_iterations, double huber_px) {
+  FitResult out = FitLm<6>(size_m, K, camera_T_object_initial, matches, max_iterations, huber_px, Perturb);
+  if (matches.empty()) return out;
   // Covariance: the inverse of the weighted normal matrix, scaled by the residual variance.
-  jacobian(pose);
+  const Eigen::Matrix3d K_inv_t = K.inverse().transpose();
+  const Eigen::Index m = static_cast<Eigen::Index>(2 * matches.size());
+  Eigen::VectorXd r(m), rp(m), rm(m);
+  Eigen::Matrix<double, Eigen::Dynamic, 6> J(m, 6);
+  Residuals(size_m, K_inv_t, out.camera_T_object, matches, &r);
+  for (int k = 0; k < 6; ++k) {
+    Vector6d d = Vector6d::Zero();
+    d(k) = 1e-7;
+    Residuals(size_m, K_inv_t, Perturb(out.camera_T_object, d), matches, &rp);
+    d(k) = -1e-7;
+    Residuals(size_m, K_inv_t, Perturb(out.camera_T_object, d), matches, &rm);
+    J.col(k) = (rp - rm) / 2e-7;
+  }
+  Eigen::VectorXd w(m);
   for (Eigen::Index i = 0; i < m; ++i) w(i) = HuberWeight(r(i), huber_px);
   const Matrix6d H = J.transpose() * w.asDiagonal() * J;
   double weighted = 0;
@@ -134,6 +165,26 @@ FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K
   Eigen::FullPivLU<Matrix6d> lu(H);
   out.covariance_camera = lu.isInvertible() ? Matrix6d(sigma2 * lu.inverse())
                                             : Matrix6d(Matrix6d::Identity() * std::numeric_limits<double>::infinity());
+  return out;
+}
+
+FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
+                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
+                         int max_iterations, double huber_px) {
+  // Parameters: a translation along world x, y and a turn about the world's vertical through the
+  // object's centre; the height and the tilt stay as the support gave them.
+  const geometry::Pose3 world_T_camera = camera_T_world.Inverse();
+  auto perturb = [&](const geometry::Pose3& camera_T_object, const Eigen::Vector3d& d) {
+    geometry::Pose3 world_T_object = world_T_camera * camera_T_object;
+    world_T_object.rotation = (Eigen::Quaterniond(Eigen::AngleAxisd(d.z(), Eigen::Vector3d::UnitZ())) *
+                               world_T_object.rotation).normalized();
+    world_T_object.translation += Eigen::Vector3d(d.x(), d.y(), 0);
+    return camera_T_world * world_T_object;
+  };
+  FitResult out = FitLm<3>(size_m, K, camera_T_object_initial, matches, max_iterations, huber_px, perturb);
+  if (matches.empty()) return out;
+  // The covariance of the full pose at the constrained optimum (what the recognition reports).
+  out.covariance_camera = FitPoseToLines(size_m, K, out.camera_T_object, matches, 0, huber_px).covariance_camera;
   return out;
 }
 

@@ -236,6 +236,68 @@ TEST(CalibrationTest, PredictedPositionCovarianceValidates) {
   EXPECT_FALSE(CalibrateExtrinsics(truth, points, ExtrinsicsOptions{-1}).ok());
 }
 
+// Points carry their own sigma: the pose follows the precise ones, and a point far beyond its sigma
+// (a snap to a wrong edge) is dropped when asked to, and reported.
+TEST(CalibrationTest, WeightsPointsBySigmaAndDropsOutliers) {
+  const Camera truth = PuzzleCamera();
+  std::vector<PointCorrespondence> points;
+  for (const Eigen::Vector3d& p : RecommendedPoints()) points.push_back({"", *truth.Project(p), p, 0.1});
+  auto position_error_mm = [&](const ExtrinsicsResult& r) {
+    return (r.world_T_camera.translation - truth.world_T_camera().translation).norm() * 1e3;
+  };
+  // One point 1.5 px off: as precise as the others it pulls the pose; with its true sigma it barely does.
+  std::vector<PointCorrespondence> coarse = points;
+  coarse[2].pixel += Eigen::Vector2d(1.5, 0);
+  std::vector<PointCorrespondence> equal = coarse;
+  for (PointCorrespondence& p : equal) p.sigma_px = 0;
+  coarse[2].sigma_px = 2.0;
+  auto weighted = CalibrateExtrinsics(truth, coarse);
+  auto unweighted = CalibrateExtrinsics(truth, equal);
+  ASSERT_TRUE(weighted.ok() && unweighted.ok());
+  EXPECT_LT(position_error_mm(*weighted), 0.2 * position_error_mm(*unweighted));
+  EXPECT_LT(weighted->position_sigma_m, unweighted->position_sigma_m);  // 0.1 px points predict better
+  // One point 3 px off with a small sigma: kept by default, dropped with drop_beyond_sigmas.
+  std::vector<PointCorrespondence> wrong = points;
+  wrong[4].pixel += Eigen::Vector2d(0, 3);
+  ExtrinsicsOptions drop;
+  drop.drop_beyond_sigmas = 4;
+  auto kept = CalibrateExtrinsics(truth, wrong);
+  auto dropped = CalibrateExtrinsics(truth, wrong, drop);
+  ASSERT_TRUE(kept.ok() && dropped.ok());
+  EXPECT_FALSE(kept->dropped[4]);
+  ASSERT_EQ(dropped->dropped.size(), wrong.size());
+  for (std::size_t i = 0; i < wrong.size(); ++i) EXPECT_EQ(dropped->dropped[i], i == 4) << i;
+  EXPECT_GT(dropped->residuals_px[4], 2.5);
+  EXPECT_LT(position_error_mm(*dropped), 0.01);
+  EXPECT_GT(position_error_mm(*kept), 1.0);
+  ExtrinsicsOptions bad;
+  bad.drop_beyond_sigmas = -1;
+  EXPECT_FALSE(bad.Validate().ok());
+}
+
+// Model-guided snapping refuses, with a reason, where the image shows none of the point's edges, and
+// SnapCorrespondences then keeps every click (and leaves its sigma to the click sigma).
+TEST(CalibrationTest, ModelGuidedSnappingKeepsClicksWithoutEdges) {
+  const Camera truth = PuzzleCamera();
+  const cv::Mat flat(truth.height(), truth.width(), CV_8UC1, cv::Scalar(120));
+  std::vector<PointCorrespondence> points;
+  for (const Eigen::Vector3d& p : RecommendedPoints()) {
+    points.push_back({"", *truth.Project(p), p, 0, {{0.1, 0, 0}, {0, 0.1, 0}, {0, 0, -0.03}}});
+  }
+  const SnapResult one = SnapToModelCorner(flat, truth, points[1], SnapOptions{});
+  EXPECT_FALSE(one.snapped);
+  EXPECT_EQ(one.pixel, points[1].pixel);
+  EXPECT_NE(one.reason.find("no edge of the model"), std::string::npos) << one.reason;
+  std::vector<PointCorrespondence> snapped = points;
+  const std::vector<SnapResult> all = SnapCorrespondences(flat, truth, snapped, SnapOptions{}, 0.5);
+  ASSERT_EQ(all.size(), points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    EXPECT_FALSE(all[i].snapped) << i;
+    EXPECT_EQ(snapped[i].pixel, points[i].pixel);
+    EXPECT_EQ(snapped[i].sigma_px, 0);
+  }
+}
+
 // A synthetic image: a wedge of brightness `inside` on `outside`, its apex at `apex` (px), edges
 // along `dir_a` and `dir_b`; drawn 8x larger and averaged down (exact coverage to 1/64 px^2),
 // blurred like the renderer's lens (0.85 px) and given sensor noise.
@@ -333,6 +395,20 @@ TEST(CalibrationTest, PointFilesAreValidated) {
   ASSERT_TRUE(round_trip.ok()) << round_trip.status().message();
   EXPECT_EQ(round_trip->at(3).name, "d");
   EXPECT_EQ(round_trip->at(2).pixel, Eigen::Vector2d(5, 6));
+  // Optional edges (direction x length, m) round-trip; a zero-length one is named.
+  four[0].edges_in_world = {{0.24, 0, 0}, {0, 0, -0.03}};
+  auto with_edges = ParsePointCorrespondences(PointCorrespondencesToJson(four), "mem");
+  ASSERT_TRUE(with_edges.ok()) << with_edges.status().message();
+  ASSERT_EQ(with_edges->at(0).edges_in_world.size(), 2u);
+  EXPECT_EQ(with_edges->at(0).edges_in_world[1], Eigen::Vector3d(0, 0, -0.03));
+  EXPECT_TRUE(with_edges->at(1).edges_in_world.empty());
+  json::Json zero = PointCorrespondencesToJson(four);
+  zero["points"][0]["edges"][1] = {0, 0, 0};
+  auto zero_edge = ParsePointCorrespondences(zero, "mem");
+  ASSERT_FALSE(zero_edge.ok());
+  EXPECT_NE(zero_edge.status().message().find("points[0].edges[1]"), std::string::npos)
+      << zero_edge.status().message();
+  four[0].edges_in_world.clear();
   four.pop_back();
   auto three = ParsePointCorrespondences(PointCorrespondencesToJson(four), "mem");
   ASSERT_FALSE(three.ok());

@@ -150,9 +150,10 @@ TEST(DevSetTest, RecognizesTheBlocksOfTheTwelveImages) {
   std::printf("time per image: median %.1f ms, max %.1f ms\n", median(times_ms), max(times_ms));
 
   // Thresholds met on this set (see the report; the goals are higher in places).
-  // Recall is far below the goal (98 %) and is the known weakness (see the report);
+  // Recall is below the goal (98 %) and is the known weakness (see the report); the
+  // support-plane hypotheses raised it from 21 to 27 of 38 (the index alone fails this threshold);
   // false positives, accuracy and time meet it.
-  EXPECT_GE(bins[0].found, static_cast<int>(0.55 * bins[0].objects));
+  EXPECT_GE(bins[0].found, static_cast<int>(0.68 * bins[0].objects));
   EXPECT_LE(false_positives, 1);
   EXPECT_LT(median(rotation_errors_deg), 0.5);
   EXPECT_LT(max(rotation_errors_deg), 1.0);

@@ -214,6 +214,9 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o = RecognizerOptions();
   o.view_distances_m.clear();
   EXPECT_FALSE(o.Validate().ok());
+  o = RecognizerOptions();
+  o.max_support_hypotheses = 0;
+  EXPECT_NE(o.Validate().message().find("max_support_hypotheses"), std::string::npos);
 }
 
 std::string WriteTemp(const std::string& name, const std::string& text) {
@@ -351,8 +354,8 @@ TEST(RecognizerTest, TheTraceTellsWhichStageLostAnObject) {
   // A cube where the image shows only the table.
   const geometry::Pose3 camera_T_cube = camera.camera_T_world() * OnTable(Cube().box_size_m, -0.08, 0.06, 0.2);
   EXPECT_EQ(ClassifyLoss(Cube(), 0, camera, camera_T_cube, detection, groups, trace).stage, LossStage::kSegments);
-  // The bar's lines without any group: nothing to index.
-  EXPECT_EQ(ClassifyLoss(Bar(), 1, camera, camera_T_bar, detection, {}, trace).stage, LossStage::kGroups);
+  // The bar's lines without any group and no hypothesis of any source near it.
+  EXPECT_EQ(ClassifyLoss(Bar(), 1, camera, camera_T_bar, detection, {}, RecognitionTrace{}).stage, LossStage::kGroups);
   // Groups but no hypothesis was fitted.
   EXPECT_EQ(ClassifyLoss(Bar(), 1, camera, camera_T_bar, detection, groups, RecognitionTrace{}).stage,
             LossStage::kHypotheses);
@@ -366,6 +369,129 @@ TEST(RecognizerTest, TheTraceTellsWhichStageLostAnObject) {
   const StageLoss rejected = ClassifyLoss(Bar(), 1, camera, camera_T_bar, detection, groups, wrong);
   EXPECT_EQ(rejected.stage, LossStage::kVerification);
   EXPECT_EQ(rejected.verification, RecognitionTrace::Outcome::kSupport);
+}
+
+// ---- the support-plane source
+
+TEST(SupportHypothesesTest, AnArmAlongTheImageVerticalIsTheVerticalEdge) {
+  const Camera camera = SyntheticCamera();
+  const Eigen::Matrix3d K = camera.K();
+  const geometry::Pose3& camera_T_world = camera.camera_T_world();
+  auto px = [&](const Eigen::Vector3d& p) -> Eigen::Vector2d { return (K * (camera_T_world * p)).hnormalized(); };
+  for (const Eigen::Vector3d& bottom : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(-0.1, 0.08, 0), Eigen::Vector3d(0.12, -0.05, 0)}) {
+    const Eigen::Vector3d top = bottom + Eigen::Vector3d(0, 0, 0.045);
+    // The image of the vertical through the corner, both ways.
+    EXPECT_LT((UpImageDirection(K, camera_T_world, px(bottom)) - (px(top) - px(bottom)).normalized()).norm(), 1e-9);
+    EXPECT_EQ(VerticalArm(K, camera_T_world, px(bottom), px(top), 2 * M_PI / 180), 1);
+    EXPECT_EQ(VerticalArm(K, camera_T_world, px(top), px(bottom), 2 * M_PI / 180), -1);
+    // Horizontal edges from the same corner are not vertical (this camera sees them across).
+    for (double yaw : {0.0, 0.9, 2.0}) {
+      const Eigen::Vector3d along(0.045 * std::cos(yaw), 0.045 * std::sin(yaw), 0);
+      const double angle = std::acos(std::abs(UpImageDirection(K, camera_T_world, px(bottom))
+                                                  .dot((px(bottom + along) - px(bottom)).normalized())));
+      EXPECT_EQ(VerticalArm(K, camera_T_world, px(bottom), px(bottom + along), 2 * M_PI / 180), 0)
+          << "yaw " << yaw << ": " << angle * 180 / M_PI << " deg from the vertical";
+    }
+  }
+}
+
+TEST(SupportHypothesesTest, ACornerOfABlockOnTheTableGivesItsPoseBeforeAnyFit) {
+  const Camera camera = SyntheticCamera();
+  const ModelLibrary library{{Cube(), Bar()}};
+  RecognizerOptions options;
+  for (const double yaw : {-0.3, 0.45, 1.2}) {
+    const geometry::Pose3 truth = OnTable(Bar().box_size_m, 0.03, -0.02, yaw);
+    const cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, truth}}, 11);
+    const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+    const std::vector<ImageCorner> corners = FindCorners(detection.lines, options);
+    EXPECT_GE(corners.size(), 6u);
+    const std::vector<SupportHypothesis> hypotheses =
+        SupportHypotheses(library, camera, detection, corners, {SupportPlane{}}, options);
+    ASSERT_FALSE(hypotheses.empty());
+    EXPECT_LE(static_cast<int>(hypotheses.size()), options.max_support_hypotheses);
+    // The best-supported one is the bar where it stands, within 2 mm and 1 deg.
+    const SupportHypothesis& best = hypotheses.front();
+    EXPECT_EQ(best.model, 1) << "yaw " << yaw;
+    EXPECT_LT((best.world_T_object.translation - truth.translation).norm(), 0.002) << "yaw " << yaw;
+    EXPECT_LT(SymmetricRotationAngle(Bar(), best.world_T_object, truth), M_PI / 180) << "yaw " << yaw;
+    EXPECT_GT(best.score, 0.9);
+    for (size_t i = 1; i < hypotheses.size(); ++i) EXPECT_LE(hypotheses[i].score, hypotheses[i - 1].score);
+  }
+  // On a plane 30 mm higher the same corners give no bar on the table.
+  SupportPlane high;
+  high.z_m = 0.03;
+  const geometry::Pose3 truth = OnTable(Bar().box_size_m, 0.03, -0.02, 0.45);
+  const cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, truth}}, 11);
+  const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+  for (const SupportHypothesis& h :
+       SupportHypotheses(library, camera, detection, FindCorners(detection.lines, options), {high}, options)) {
+    EXPECT_GT((h.world_T_object.translation - truth.translation).norm(), 0.005);
+  }
+}
+
+TEST(PoseFitTest, OnItsSupportPlaneRecoversPositionAndYawAndKeepsHeightAndTilt) {
+  const Camera camera = SyntheticCamera();
+  const Eigen::Matrix3d K = camera.K();
+  const Model bar = Bar();
+  const geometry::Pose3 truth = OnTable(bar.box_size_m, 0.02, 0.01, 0.6);
+  const geometry::Pose3 camera_T_truth = camera.camera_T_world() * truth;
+  std::vector<LineMatch> matches;
+  const uint16_t visible = VisibleBoxEdges(bar.box_size_m, camera_T_truth.Inverse().translation);
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    const Eigen::Vector3d a = camera_T_truth * BoxVertex(bar.box_size_m, kBoxEdges[e][0]);
+    const Eigen::Vector3d b = camera_T_truth * BoxVertex(bar.box_size_m, kBoxEdges[e][1]);
+    const Eigen::Vector2d pa = (K * a).hnormalized(), pb = (K * b).hnormalized();
+    matches.push_back({e, pa + 0.2 * (pb - pa), pa + 0.8 * (pb - pa)});
+  }
+  geometry::Pose3 start = truth;
+  start.translation += Eigen::Vector3d(0.004, -0.003, 0);
+  start.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(0.05, Eigen::Vector3d::UnitZ())) * start.rotation;
+  const FitResult fit =
+      FitPoseOnPlane(bar.box_size_m, K, camera.camera_T_world(), camera.camera_T_world() * start, matches, 30, 1.5);
+  const geometry::Pose3 world_T_fit = camera.world_T_camera() * fit.camera_T_object;
+  EXPECT_LT((world_T_fit.translation - truth.translation).norm(), 1e-6);
+  EXPECT_LT(SymmetricRotationAngle(bar, world_T_fit, truth), 1e-6);
+  EXPECT_LT(fit.rms_px, 1e-4);
+  EXPECT_GT(fit.covariance_camera(0, 0), 0);
+  // A start 2 mm too high stays 2 mm too high: the fit moves only on the plane.
+  start.translation.z() += 0.002;
+  const FitResult high =
+      FitPoseOnPlane(bar.box_size_m, K, camera.camera_T_world(), camera.camera_T_world() * start, matches, 30, 1.5);
+  EXPECT_NEAR((camera.world_T_camera() * high.camera_T_object).translation.z(), truth.translation.z() + 0.002, 1e-12);
+}
+
+// The ablation is one flag: without the support source the trace has no corner and no fit of
+// kind kGroupKinds; with it, the rendered block is accepted from a support hypothesis.
+TEST(RecognizerTest, TheSupportSourceCanBeSwitchedOff) {
+  const Camera camera = SyntheticCamera();
+  const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0.05, -0.04, -0.3);
+  const cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar_pose}}, 7);
+  for (const bool on : {true, false}) {
+    RecognizerOptions options = SmallIndexOptions();
+    options.support_hypotheses = on;
+    auto recognizer = Recognizer::Create({{Cube(), Bar()}}, options, "");
+    ASSERT_TRUE(recognizer.ok());
+    RecognitionTrace trace;
+    auto result = recognizer->Recognize(image, camera, nullptr, &trace);
+    ASSERT_TRUE(result.ok());
+    ASSERT_EQ(result->objects.size(), 1u) << "support source " << on;
+    EXPECT_LT((result->objects[0].raw_world_T_object.translation - bar_pose.translation).norm(), 0.003);
+    int support_fits = 0, accepted_support = 0;
+    for (const RecognitionTrace::Fitted& f : trace.fitted) {
+      if (f.group_kind != kGroupKinds) continue;
+      ++support_fits;
+      accepted_support += f.accepted ? 1 : 0;
+    }
+    if (on) {
+      EXPECT_GT(trace.corners, 0);
+      EXPECT_GT(trace.support_hypotheses, 0);
+      EXPECT_EQ(accepted_support, 1);
+    } else {
+      EXPECT_EQ(trace.corners, 0);
+      EXPECT_EQ(support_fits, 0);
+    }
+  }
 }
 
 TEST(RecognizerTest, RejectsImagesThatDoNotFitTheCamera) {

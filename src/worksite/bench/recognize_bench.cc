@@ -8,9 +8,11 @@
 // error, reprojection RMS and time per image (thread CPU time, one OpenCV thread).
 // Environment: TEACHSIM_HOME (repository), TEACHSIM_SHARED (../shared), TEACHSIM_CACHE_DIR
 // (templates and index; default: bench-cache beside the executable, in the build folder);
-// TEACHSIM_RECOGNIZE_DEBUG=1 prints every LINE-MOD match beside the truth (and each object the
-// recognizer missed with the stage that lost it); TEACHSIM_RECOGNIZE_NO_PEER=1 leaves LINE-MOD out
-// (for quick runs while working on the recognizer). For teachsim, every scored object is put down
+// TEACHSIM_RECOGNIZE_DEBUG=1 prints every LINE-MOD match beside the truth (and, for the recognizer,
+// each image's stage counts and times, each object it missed with the stage that lost it and the
+// evidence at the true pose, and each false detection); TEACHSIM_RECOGNIZE_NO_PEER=1 leaves LINE-MOD
+// out (for quick runs while working on the recognizer); TEACHSIM_RECOGNIZE_ABLATION runs the
+// recognizer with one option changed (see below: no-support, plane-only, index-N, contrast-X, score-X). For teachsim, every scored object is put down
 // to the stage that lost it (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
 
@@ -316,7 +318,19 @@ int Run(const BenchArgs& args) {
 
   // Set-up: the recognizer's index and the peer's templates (cached on disk).
   auto t0 = std::chrono::steady_clock::now();
-  auto recognizer = vision::Recognizer::Create(library, vision::RecognizerOptions{}, cache_dir);
+  // TEACHSIM_RECOGNIZE_ABLATION: "no-support" (the index alone), "plane-only" (support hypotheses
+  // fitted on their plane without the 6-DOF refinement), "index-N" (at most N index hypotheses),
+  // "contrast-X" (min_edge_contrast), "score-X" (min_score).
+  vision::RecognizerOptions recognizer_options;
+  if (const char* ablation = std::getenv("TEACHSIM_RECOGNIZE_ABLATION"); ablation != nullptr) {
+    const std::string a = ablation;
+    if (a == "no-support") recognizer_options.support_hypotheses = false;
+    if (a == "plane-only") recognizer_options.support_refine_6dof = false;
+    if (a.rfind("index-", 0) == 0) recognizer_options.max_hypotheses = std::atoi(a.c_str() + 6);
+    if (a.rfind("contrast-", 0) == 0) recognizer_options.min_edge_contrast = std::atof(a.c_str() + 9);
+    if (a.rfind("score-", 0) == 0) recognizer_options.min_score = std::atof(a.c_str() + 6);
+  }
+  auto recognizer = vision::Recognizer::Create(library, recognizer_options, cache_dir);
   const double recognizer_setup_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (!recognizer.ok()) {
     std::fprintf(stderr, "teachsim: error: recognizer: %s\n", recognizer.status().message().c_str());
@@ -381,11 +395,28 @@ int Run(const BenchArgs& args) {
         failed[0] = failed[1] = true;
       }
 
+      if (recognized.ok() && std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr) {
+        std::fprintf(stderr, "%s: %d lines, %d groups, %d corners, %d support hypotheses, %zu fitted; ms:", c.name.c_str(),
+                     trace.lines, trace.groups, trace.corners, trace.support_hypotheses, trace.fitted.size());
+        for (const auto& [stage, ms] : recognized->timing_ms) std::fprintf(stderr, " %s %.1f", stage.c_str(), ms);
+        std::fprintf(stderr, "\n");
+      }
       if (recognized.ok()) {  // which stage lost each object (not timed)
         const vision::LineDetection detection =
             vision::DetectLinesAndEdges(c.image, *camera, recognizer->options());
         const std::vector<vision::Group> groups = vision::FindGroups(detection.lines, recognizer->options());
         auto evaluation = vision::EvaluateImage(c.truth, found[0], truth->model_sizes_m, eye, match);
+        if (evaluation.ok() && std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr) {
+          for (std::size_t d = 0; d < found[0].size(); ++d) {
+            if (evaluation->detection_truth[d] != -1) continue;
+            const vision::Recognition& r = recognized->objects[d];
+            auto p = camera->Project(r.world_T_object.translation);
+            std::fprintf(stderr, "%s false %s at (%.0f, %.0f) z %.1f mm: score %.2f, matched %.2f, rms %.2f px\n",
+                         c.name.c_str(), r.model.c_str(), p ? p->x() : -1, p ? p->y() : -1,
+                         r.world_T_object.translation.z() * 1000, r.score, r.matched_edge_fraction,
+                         r.reprojection_rms_px);
+          }
+        }
         for (std::size_t i = 0; i < c.truth.size(); ++i) {
           const vision::TruthObject& t = c.truth[i];
           if (t.visible_fraction < match.min_visible_fraction || t.visible_pixels <= 0) continue;
@@ -412,6 +443,12 @@ int Run(const BenchArgs& args) {
                          vision::LossStageName(loss.stage), loss.edges_with_lines, loss.visible_edges,
                          static_cast<int>(loss.verification), loss.extent_px, loss.best_start_px, loss.best_end_px);
             for (double d : loss.best_start_rounds_px) std::fprintf(stderr, "    round: %.1f px\n", d);
+            const vision::PoseEvidence at_truth =
+                vision::EvaluatePose(library.models[static_cast<std::size_t>(model_index)], *camera,
+                                     camera->camera_T_world() * t.world_T_object, detection, recognizer->options());
+            std::fprintf(stderr, "    at the true pose: matched %.2f, support %.2f, coverage %.2f, rms %.2f px, %d matches\n",
+                         at_truth.matched_fraction, at_truth.support_fraction, at_truth.coverage, at_truth.rms_px,
+                         at_truth.matches);
           }
         }
       }

@@ -1,14 +1,16 @@
 // Extrinsic calibration end to end on rendered work-site images (issue 6: the camera position
 // within 2 mm from 6 known points with 0.5 px noise on the clicks). The clicks are the true
-// projections of the frame's and the table's corners plus noise; vision::SnapToCorner moves them to
-// the corner in the image, and vision::CalibrateExtrinsics solves the pose. The test lives here, not
-// in vision, because the images come from the worksite renderer (worksite depends on vision).
+// projections of the frame's and the table's corners plus noise; vision::SnapCorrespondences moves
+// them to the corner in the image (guided by a first pose from the clicks and the corners' 3-D
+// edges), and vision::CalibrateExtrinsics solves the pose weighted by each point's sigma. The test lives
+// here, not in vision, because the images come from the worksite renderer (worksite depends on vision).
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <random>
 
 #include "fixtures.h"
@@ -24,6 +26,7 @@ struct Feature {
   std::string name;
   std::string object;  // whose corner it is
   Eigen::Vector3d p_in_world;
+  std::vector<Eigen::Vector3d> edges_in_world;  // the straight edges leaving the corner (direction x length)
 };
 
 std::vector<Feature> RecommendedFeatures(const scene::Scene& scene) {
@@ -40,12 +43,26 @@ std::vector<Feature> RecommendedFeatures(const scene::Scene& scene) {
   }
   const geometry::Aabb t = table.shape.WorldBounds(table.world_T_object);
   const Eigen::Vector3d lo = walls.min, hi = walls.max;
-  return {{"table corner -x-y", "table", {t.min.x(), t.min.y(), t.max.z()}},
-          {"outer top +x-y", "frame", {hi.x(), lo.y(), hi.z()}},
-          {"outer top -x+y", "frame", {lo.x(), hi.y(), hi.z()}},
-          {"outer top +x+y", "frame", {hi.x(), hi.y(), hi.z()}},
-          {"inner top +x-y", "frame", {hi.x() - wall, lo.y() + wall, hi.z()}},
-          {"inner top -x+y", "frame", {lo.x() + wall, hi.y() - wall, hi.z()}}};
+  const Eigen::Vector3d x = Eigen::Vector3d::UnitX(), y = Eigen::Vector3d::UnitY(),
+                        z = Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d size = hi - lo, table_size = t.max - t.min;
+  const double inner_x = size.x() - 2 * wall, inner_y = size.y() - 2 * wall;
+  return {
+      {"table corner -x-y",
+       "table",
+       {t.min.x(), t.min.y(), t.max.z()},
+       {x * table_size.x(), y * table_size.y(), -z * table_size.z()}},
+      {"outer top +x-y", "frame", {hi.x(), lo.y(), hi.z()}, {-x * size.x(), y * size.y(), -z * size.z()}},
+      {"outer top -x+y", "frame", {lo.x(), hi.y(), hi.z()}, {x * size.x(), -y * size.y(), -z * size.z()}},
+      {"outer top +x+y", "frame", {hi.x(), hi.y(), hi.z()}, {-x * size.x(), -y * size.y(), -z * size.z()}},
+      {"inner top +x-y",
+       "frame",
+       {hi.x() - wall, lo.y() + wall, hi.z()},
+       {-x * inner_x, y * inner_y, -z * size.z()}},
+      {"inner top -x+y",
+       "frame",
+       {lo.x() + wall, hi.y() - wall, hi.z()},
+       {x * inner_x, -y * inner_y, -z * size.z()}}};
 }
 
 // The scene's camera moved by up to `shift_m` and turned by up to `turn_rad` about a random axis
@@ -85,7 +102,9 @@ bool Usable(const RenderResult& render, const std::vector<RenderObject>& objects
 }
 
 struct Summary {
-  std::vector<double> snap_error_px;      // per snapped point, |snapped - truth|
+  std::vector<double> snap_error_px;  // per snapped point, |snapped - truth|
+  std::map<std::string, std::vector<double>> snap_error_by_feature_px;
+  std::vector<double> sigma_ratio;        // per snapped point, |snapped - truth| / (sqrt 2 sigma)
   std::vector<double> position_error_mm;  // per trial
   int points = 0, unsnapped = 0;
 };
@@ -108,6 +127,14 @@ void Print(const char* label, const Summary& s) {
       label, s.position_error_mm.size(), Quantile(s.snap_error_px, 0.5), Quantile(s.snap_error_px, 0.95),
       s.unsnapped, s.points, Quantile(s.position_error_mm, 0.5), Quantile(s.position_error_mm, 0.95),
       Quantile(s.position_error_mm, 1.0), 100 * ShareBelow(s.position_error_mm, 2.0));
+  for (const auto& [name, errors] : s.snap_error_by_feature_px) {
+    std::printf("    %-20s snapped %3zu  error px median %.3f p95 %.3f max %.3f\n", name.c_str(),
+                errors.size(), Quantile(errors, 0.5), Quantile(errors, 0.95), Quantile(errors, 1.0));
+  }
+  if (!s.sigma_ratio.empty()) {
+    std::printf("    error / (sqrt 2 sigma) median %.2f p95 %.2f\n", Quantile(s.sigma_ratio, 0.5),
+                Quantile(s.sigma_ratio, 0.95));
+  }
 }
 
 enum class Clicks { kGaussianHalfPixel, kWholePixelTwoOff };
@@ -117,6 +144,9 @@ enum class Snap { kNone, kEdgeLines, kCornerSubPix };
 void RunTrials(const cv::Mat& image, const vision::Camera& truth, const std::vector<Feature>& features,
                Clicks clicks, Snap snap, int trials, std::mt19937& rng, Summary& summary) {
   std::normal_distribution<double> gaussian(0, 0.5);
+  // The operator's click accuracy, as `--click-sigma` tells it: points the snapping keeps as clicked
+  // are weighted by it. Whole-pixel clicks up to 2 px off: uniform over 4 px, sigma 4 / sqrt 12.
+  const double click_sigma_px = clicks == Clicks::kGaussianHalfPixel ? 0.5 : 4 / std::sqrt(12.0);
   std::uniform_real_distribution<double> two(-2, 2);
   vision::SnapOptions options;
   if (snap == Snap::kCornerSubPix) options.method = vision::SnapMethod::kCornerSubPix;
@@ -131,7 +161,7 @@ void RunTrials(const cv::Mat& image, const vision::Camera& truth, const std::vec
       } else {
         click = (pixel + Eigen::Vector2d(two(rng), two(rng))).array().round();
       }
-      points.push_back({f.name, click, f.p_in_world});
+      points.push_back({f.name, click, f.p_in_world, 0, f.edges_in_world});
       true_pixels.push_back(pixel);
     }
     if (snap != Snap::kNone) {
@@ -140,17 +170,23 @@ void RunTrials(const cv::Mat& image, const vision::Camera& truth, const std::vec
       const vision::Camera intrinsics_only(truth.intrinsics(), truth.distortion(),
                                            geometry::Pose3::Identity(), truth.width(), truth.height());
       const std::vector<vision::SnapResult> snapped =
-          vision::SnapCorrespondences(image, intrinsics_only, points, options);
+          vision::SnapCorrespondences(image, intrinsics_only, points, options, click_sigma_px);
       for (std::size_t i = 0; i < snapped.size(); ++i) {
         ++summary.points;
         if (snapped[i].snapped) {
-          summary.snap_error_px.push_back((snapped[i].pixel - true_pixels[i]).norm());
+          const double error = (snapped[i].pixel - true_pixels[i]).norm();
+          summary.snap_error_px.push_back(error);
+          summary.snap_error_by_feature_px[points[i].name].push_back(error);
+          if (snapped[i].sigma_px > 0)
+            summary.sigma_ratio.push_back(error / (std::sqrt(2.0) * snapped[i].sigma_px));
         } else {
           ++summary.unsnapped;
         }
       }
     }
-    auto result = vision::CalibrateExtrinsics(truth, points);
+    vision::ExtrinsicsOptions eo;
+    eo.click_sigma_px = click_sigma_px;
+    auto result = vision::CalibrateExtrinsics(truth, points, eo);
     ASSERT_TRUE(result.ok()) << result.status().message();
     summary.position_error_mm.push_back(
         (result->world_T_camera.translation - truth.world_T_camera().translation).norm() * 1e3);
@@ -216,24 +252,45 @@ Measurement Measure() {
   return m;
 }
 
-// What snapping does today: clicks that are whole pixels and up to ~2 px off come out better
-// snapped than as clicked (median camera position error 3.0 vs 4.3 mm), most snapped corners land
+// Measured once per process: the tests below share it (the renders and 720 trials take ~12 s).
+const Measurement& Measured() {
+  static const Measurement m = Measure();
+  return m;
+}
+
+// What snapping does today: clicks that are whole pixels and up to ~2 px off come out far better
+// snapped than as clicked (median camera position error 1.4 vs 4.3 mm), most snapped corners land
 // within half a pixel of the truth, and a point that cannot be snapped is reported, not moved.
 TEST(CalibrationSnapTest, SnappingImprovesCoarseClicks) {
-  const Measurement m = Measure();
+  const Measurement& m = Measured();
   ASSERT_GE(m.images, 5);
   EXPECT_LT(Quantile(m.whole_lines.position_error_mm, 0.5),
-            0.85 * Quantile(m.whole_none.position_error_mm, 0.5));
+            0.5 * Quantile(m.whole_none.position_error_mm, 0.5));
+  EXPECT_GT(ShareBelow(m.whole_lines.position_error_mm, 2.0), 0.6);
   EXPECT_LT(Quantile(m.whole_lines.snap_error_px, 0.5), 0.5);
   EXPECT_GT(m.whole_lines.points - m.whole_lines.unsnapped, m.whole_lines.points / 2);
 }
 
+// Clicks of sigma 0.5 px: the model-guided snapping (a first pose from the clicks predicts each
+// corner's edges, blurred steps fitted along them, the pose weighted by each snap's sigma) puts the
+// camera within 2 mm far more often than the clicks alone (88 % vs 47.5 % of the trials).
+TEST(CalibrationSnapTest, SnappingImprovesHalfPixelClicks) {
+  const Measurement& m = Measured();
+  ASSERT_GE(m.images, 5);
+  EXPECT_GT(ShareBelow(m.gauss_lines.position_error_mm, 2.0),
+            ShareBelow(m.gauss_none.position_error_mm, 2.0) + 0.2);
+  EXPECT_LT(Quantile(m.gauss_lines.position_error_mm, 0.95),
+            0.8 * Quantile(m.gauss_none.position_error_mm, 0.95));
+  EXPECT_LT(Quantile(m.gauss_lines.snap_error_px, 0.95), 1.2);
+}
+
 // Issue 6's bar: the camera position within 2 mm in >= 95 % of the trials with 6 points clicked at
-// 0.5 px. NOT MET YET (docs/formats/calibration.md): the snapped corners are off by 0.35 px median
-// with a tail of wrong edges (grain beside a face's edge), which is no better than the clicks.
+// 0.5 px. NOT MET YET (docs/formats/calibration.md): 88 % (sigma 0.5 px clicks) and 82 %
+// (whole-pixel clicks). The wood grain runs along the frame's top edges, and a stripe beside an edge
+// moves the fitted step by 0.2-0.9 px at some corners (untextured renders pass: 100 %).
 // Run with --gtest_also_run_disabled_tests to see the figures.
 TEST(CalibrationSnapTest, DISABLED_SnappedClicksPutTheCameraWithinTwoMillimetres) {
-  const Measurement m = Measure();
+  const Measurement& m = Measured();
   ASSERT_GE(m.images, 5);
   EXPECT_GE(ShareBelow(m.gauss_lines.position_error_mm, 2.0), 0.95);
   EXPECT_GE(ShareBelow(m.whole_lines.position_error_mm, 2.0), 0.95);

@@ -83,6 +83,55 @@ FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K
                          const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
                          int max_iterations, double huber_px);
 
+// The same with the object kept on its support plane: 3 parameters (world x, y and a turn about the
+// world's vertical through the object's centre); height and tilt stay as the start gave them. Fewer
+// ways to drift onto a shadow or grain line than the 6-DOF fit. Covariance: of the full pose.
+FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
+                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
+                         int max_iterations, double huber_px);
+
+// ---- a second hypothesis source beside the index (paper §7.1: several groupings in parallel;
+// §4.3: objects rest on the table): a block at rest stands on one of its faces on a horizontal
+// support plane, so its pose has 3 DOF (x, y, yaw) per resting face, and one image corner (an L
+// junction of two segments) whose corner lies on the bottom or top plane of the block gives it.
+struct SupportPlane {
+  double z_m = 0;                                          // world height of the plane, m
+  Eigen::Vector2d min_xy = Eigen::Vector2d::Constant(-1);  // where on it a block may stand (world x, y), m
+  Eigen::Vector2d max_xy = Eigen::Vector2d::Constant(1);
+};
+// Two segments whose ends meet (the lines' intersection within options.junction_gap_px, or a
+// quarter of the shorter segment, of both ends) at more than 15 deg.
+struct ImageCorner {
+  Eigen::Vector2d point = Eigen::Vector2d::Zero();  // the lines' intersection, undistorted px
+  std::array<Eigen::Vector2d, 2> arm_end{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};  // far ends, px
+  std::array<int, 2> segments{-1, -1};              // indices into the image lines
+};
+std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& lines, const RecognizerOptions& options);
+// The image direction (unit, undistorted px) in which a world point at pixel `px` moves when it
+// rises along the world's z axis (towards or away from the vertical vanishing point).
+Eigen::Vector2d UpImageDirection(const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world, const Eigen::Vector2d& px);
+// An arm of a corner as a vertical edge: +1 when it runs up from the corner (the corner is on the
+// block's bottom plane), -1 down (top plane), 0 when its image direction is more than tolerance_rad
+// from the vertical through the corner.
+int VerticalArm(const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world, const Eigen::Vector2d& corner_px,
+                const Eigen::Vector2d& arm_end_px, double tolerance_rad);
+struct SupportHypothesis {
+  int model = 0;                     // index into the library
+  geometry::Pose3 world_T_object;    // the block resting on the plane
+  double score = 0;                  // edge support along the visible predicted edges before any fit, 0..1
+  int corner = 0;                    // into the corners
+  int plane = 0;                     // into the planes
+};
+// Every pose that a corner gives on each plane for each model and resting face, filtered by the
+// arms' perpendicularity on the plane and their lengths against the model's edges, scored by edge
+// support (detection.edge_map), and thinned to the best per model and place: at most
+// options.max_support_hypotheses, best first, each with score >= options.support_min_score.
+std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, const Camera& camera,
+                                                 const LineDetection& detection,
+                                                 const std::vector<ImageCorner>& corners,
+                                                 const std::vector<SupportPlane>& planes,
+                                                 const RecognizerOptions& options);
+
 // ---- item 5: the evidence for a pose (what verification decides on).
 struct PoseEvidence {
   double matched_fraction = 0;  // of the visible predicted edge length covered by matched lines
@@ -99,7 +148,7 @@ PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geomet
 // ---- measuring: at which stage the recognizer lost a true object (issue 7's "measure first").
 enum class LossStage : uint8_t {
   kSegments,      // fewer than 3 of its visible edges have an image line along them
-  kGroups,        // no perceptual group made only of its edges
+  kGroups,        // no perceptual group made only of its edges, and no hypothesis (index or support) started near it
   kHypotheses,    // no fitted hypothesis of its model started near its pose (index, ranking or cap)
   kFit,           // hypotheses started near it, none converged onto it
   kVerification,  // a fit converged onto it and verification or culling rejected it

@@ -1,0 +1,292 @@
+// Support-plane hypotheses: a second source of pose hypotheses beside the model-view index (paper
+// §7.1, "several groupings in parallel"). A block at rest stands on one of its faces on a horizontal
+// support (the table, a fixed object's top; the model editor rests objects there, §4.3), so its
+// pose has 3 DOF per resting face. An image corner (two segments meeting at an L) whose corner point
+// lies on the block's bottom or top plane fixes them: the corner back-projects onto that plane,
+// each arm is a horizontal edge (its direction on the plane gives the yaw) or the vertical edge
+// (pointing along the image of the world's vertical), and the model's edge lengths and the arms'
+// directions leave a few poses per corner, which edge support ranks before any fit.
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <optional>
+
+#include "teachsim/vision/recognition_stages.h"
+
+namespace teachsim::vision {
+
+namespace {
+
+double Cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
+
+Eigen::Vector2d End(const ImageLine& l, int end) { return end == 0 ? l.a : l.b; }
+
+// Edge support before any fit: sample points along the visible predicted edges (projected with the
+// lens, straight between the projected vertices) with a Canny edge pixel within 2 px across whose
+// gradient is across the edge, over all sample points inside the image.
+double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const geometry::Pose3& camera_T_object,
+                    const EdgeMap& edge_map, double spacing_px) {
+  const uint16_t visible = VisibleBoxEdges(size_m, camera_T_object.Inverse().translation);
+  Eigen::Vector2d px[8];
+  for (int i = 0; i < 8; ++i) {
+    const auto p = camera.ProjectFromCamera(camera_T_object * BoxVertex(size_m, i), 0.05);
+    if (!p) return 0;
+    px[i] = *p;
+  }
+  const double cos_tol = std::cos(25 * M_PI / 180);
+  int samples = 0, supported = 0;
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    const Eigen::Vector2d a = px[kBoxEdges[static_cast<size_t>(e)][0]], b = px[kBoxEdges[static_cast<size_t>(e)][1]];
+    const double length = (b - a).norm();
+    if (length < 3) continue;
+    const Eigen::Vector2d along = (b - a) / length, normal(-along.y(), along.x());
+    const int n = std::max(2, static_cast<int>(length / spacing_px));
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector2d c = a + (0.08 + 0.84 * (i + 0.5) / n) * (b - a);
+      if (!camera.InImage(c)) continue;
+      ++samples;
+      for (int o = 0; o <= 4; ++o) {
+        const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
+        const int x = static_cast<int>(std::lround(c.x() + offset * normal.x()));
+        const int y = static_cast<int>(std::lround(c.y() + offset * normal.y()));
+        if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
+        if (!edge_map.edges.at<uint8_t>(y, x)) continue;
+        const float g = edge_map.direction.at<float>(y, x);
+        if (std::abs(std::cos(g) * normal.x() + std::sin(g) * normal.y()) >= cos_tol) {
+          ++supported;
+          break;
+        }
+      }
+    }
+  }
+  return samples >= 8 ? static_cast<double>(supported) / samples : 0;
+}
+
+// Equal poses of a box up to the signs of its axes (the symmetries every box has), for thinning.
+bool SamePlace(const SupportHypothesis& a, const SupportHypothesis& b, double distance_m) {
+  if (a.model != b.model || (a.world_T_object.translation - b.world_T_object.translation).norm() > distance_m) {
+    return false;
+  }
+  const Eigen::Matrix3d ra = a.world_T_object.RotationMatrix(), rb = b.world_T_object.RotationMatrix();
+  const double cos_tol = std::cos(10 * M_PI / 180);
+  for (int c = 0; c < 3; ++c) {
+    if (std::abs(ra.col(c).dot(rb.col(c))) < cos_tol) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& lines, const RecognizerOptions& options) {
+  std::vector<ImageCorner> corners;
+  const int n = static_cast<int>(lines.size());
+  const double min_sin = std::sin(15.0 * M_PI / 180);
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector2d di = (lines[static_cast<size_t>(i)].b - lines[static_cast<size_t>(i)].a).normalized();
+    for (int j = i + 1; j < n; ++j) {
+      const Eigen::Vector2d dj = (lines[static_cast<size_t>(j)].b - lines[static_cast<size_t>(j)].a).normalized();
+      const double s = Cross2(di, dj);
+      if (std::abs(s) < min_sin) continue;
+      const double gap = std::max(options.junction_gap_px,
+                                  0.25 * std::min(lines[static_cast<size_t>(i)].Length(), lines[static_cast<size_t>(j)].Length()));
+      for (int ei = 0; ei < 2; ++ei) {
+        const Eigen::Vector2d p = End(lines[static_cast<size_t>(i)], ei);
+        for (int ej = 0; ej < 2; ++ej) {
+          const Eigen::Vector2d q = End(lines[static_cast<size_t>(j)], ej);
+          if ((p - q).squaredNorm() > 4 * gap * gap) continue;
+          const double t = Cross2(q - p, dj) / s;
+          const Eigen::Vector2d x = p + t * di;
+          if ((x - p).norm() > gap || (x - q).norm() > gap) continue;
+          ImageCorner c;
+          c.point = x;
+          c.arm_end = {End(lines[static_cast<size_t>(i)], 1 - ei), End(lines[static_cast<size_t>(j)], 1 - ej)};
+          c.segments = {i, j};
+          corners.push_back(c);
+        }
+      }
+    }
+  }
+  return corners;
+}
+
+Eigen::Vector2d UpImageDirection(const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world, const Eigen::Vector2d& px) {
+  // d/dt of the projection of P + t up at t = 0, times depth: (K up)_xy - px (K up)_z.
+  const Eigen::Vector3d up = K * camera_T_world.Rotate(Eigen::Vector3d::UnitZ());
+  const Eigen::Vector2d d = up.head<2>() - px * up.z();
+  const double norm = d.norm();
+  return norm > 1e-12 ? Eigen::Vector2d(d / norm) : Eigen::Vector2d(0, -1);
+}
+
+int VerticalArm(const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world, const Eigen::Vector2d& corner_px,
+                const Eigen::Vector2d& arm_end_px, double tolerance_rad) {
+  const Eigen::Vector2d up = UpImageDirection(K, camera_T_world, corner_px);
+  const Eigen::Vector2d arm = arm_end_px - corner_px;
+  const double length = arm.norm();
+  if (length < 1e-9) return 0;
+  const double cos_angle = up.dot(arm) / length;
+  if (std::abs(cos_angle) < std::cos(tolerance_rad)) return 0;
+  return cos_angle > 0 ? 1 : -1;
+}
+
+std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, const Camera& camera,
+                                                 const LineDetection& detection,
+                                                 const std::vector<ImageCorner>& corners,
+                                                 const std::vector<SupportPlane>& planes,
+                                                 const RecognizerOptions& options) {
+  const Eigen::Matrix3d K = camera.K();
+  const Eigen::Matrix3d K_inv = K.inverse();
+  const geometry::Pose3& camera_T_world = camera.camera_T_world();
+  const geometry::Pose3& world_T_camera = camera.world_T_camera();
+  const Eigen::Vector3d centre = world_T_camera.translation;
+  const Eigen::Matrix3d world_R_camera = world_T_camera.RotationMatrix();
+  const double sin_perpendicular = std::sin(options.support_perpendicular_tol_deg * M_PI / 180);
+  const double vertical_tol = options.support_vertical_tol_deg * M_PI / 180;
+  constexpr double kLengthSlack = 1.1, kLengthSlackM = 0.004;  // an arm may be this much longer than its edge
+  constexpr double kRegionMarginM = 0.01;
+
+  // Where the ray through an undistorted pixel meets the plane z = z_m (in front of the camera).
+  auto on_plane = [&](const Eigen::Vector2d& px, double z_m) -> std::optional<Eigen::Vector3d> {
+    const Eigen::Vector3d d = world_R_camera * (K_inv * Eigen::Vector3d(px.x(), px.y(), 1));
+    if (std::abs(d.z()) < 1e-9) return std::nullopt;
+    const double t = (z_m - centre.z()) / d.z();
+    if (!(t > 0.05)) return std::nullopt;
+    return centre + t * d;
+  };
+  auto project = [&](const Eigen::Vector3d& p_in_world) -> Eigen::Vector2d {
+    return (K * (camera_T_world * p_in_world)).hnormalized();
+  };
+
+  // Resting faces per model: the up axis and its two horizontal axes, without repeats (a box with
+  // two equal sides has two resting faces that look alike).
+  struct Resting {
+    int model, up, a, b;
+  };
+  std::vector<Resting> resting;
+  for (size_t m = 0; m < models.models.size(); ++m) {
+    const Eigen::Vector3d& s = models.models[m].box_size_m;
+    for (int up = 0; up < 3; ++up) {
+      const int a = (up + 1) % 3, b = (up + 2) % 3;
+      bool repeat = false;
+      for (int prev = 0; prev < up; ++prev) {
+        const int pa = (prev + 1) % 3, pb = (prev + 2) % 3;
+        const double tol = 1e-6 * s.maxCoeff();
+        repeat = repeat || (std::abs(s[prev] - s[up]) < tol &&
+                            ((std::abs(s[pa] - s[a]) < tol && std::abs(s[pb] - s[b]) < tol) ||
+                             (std::abs(s[pa] - s[b]) < tol && std::abs(s[pb] - s[a]) < tol)));
+      }
+      if (!repeat) resting.push_back({static_cast<int>(m), up, a, b});
+    }
+  }
+
+  std::vector<SupportHypothesis> all;
+  // The box with its corner at `corner`, its axis i along u_i (unit, horizontal), j along u_j and
+  // the up axis rising (bottom corner) or falling (top corner) from the corner.
+  auto emit = [&](const Resting& r, int i, int j, const Eigen::Vector3d& corner, const Eigen::Vector3d& u_i,
+                  const Eigen::Vector3d& u_j, bool bottom, int corner_index, int plane_index) {
+    const Eigen::Vector3d& s = models.models[static_cast<size_t>(r.model)].box_size_m;
+    const Eigen::Vector3d vertical = Eigen::Vector3d::UnitZ() * (bottom ? 1.0 : -1.0);
+    Eigen::Matrix3d rotation;
+    rotation.col(i) = u_i;
+    rotation.col(j) = u_j;
+    rotation.col(r.up) = Eigen::Vector3d::UnitZ();
+    // The box is symmetric under reflection in its mid-planes: a left-handed frame is the same box
+    // with one axis reversed.
+    if (rotation.determinant() < 0) rotation.col(r.up) = -rotation.col(r.up);
+    const Eigen::Vector3d middle = corner + 0.5 * (s[i] * u_i + s[j] * u_j + s[r.up] * vertical);
+    if (middle.head<2>().norm() > options.work_area_radius_m) return;
+    SupportHypothesis h;
+    h.model = r.model;
+    h.world_T_object = geometry::Pose3(Eigen::Quaterniond(rotation).normalized(), middle);
+    const geometry::Pose3 camera_T_object = camera_T_world * h.world_T_object;
+    if (!(camera_T_object.translation.z() > 0.05)) return;
+    // Coarse samples first (most poses are wrong and show it anywhere along their outline).
+    if (QuickSupport(s, camera, camera_T_object, detection.edge_map, 12) < options.support_min_score - 0.2) return;
+    h.score = QuickSupport(s, camera, camera_T_object, detection.edge_map, 3);
+    if (h.score < options.support_min_score) return;
+    h.corner = corner_index;
+    h.plane = plane_index;
+    all.push_back(h);
+  };
+
+  for (size_t c = 0; c < corners.size(); ++c) {
+    const ImageCorner& corner = corners[c];
+    int vertical[2];
+    for (int k = 0; k < 2; ++k) vertical[k] = VerticalArm(K, camera_T_world, corner.point, corner.arm_end[static_cast<size_t>(k)], vertical_tol);
+    for (size_t p = 0; p < planes.size(); ++p) {
+      const SupportPlane& plane = planes[p];
+      for (const Resting& r : resting) {
+        const Eigen::Vector3d& s = models.models[static_cast<size_t>(r.model)].box_size_m;
+        for (int level = 0; level < 2; ++level) {
+          const bool bottom = level == 0;
+          const double z = plane.z_m + (bottom ? 0.0 : s[r.up]);
+          const std::optional<Eigen::Vector3d> at = on_plane(corner.point, z);
+          if (!at) continue;
+          const Eigen::Vector3d P = *at;
+          if ((P.head<2>() - plane.min_xy).minCoeff() < -kRegionMarginM ||
+              (plane.max_xy - P.head<2>()).minCoeff() < -kRegionMarginM) {
+            continue;
+          }
+          // Each arm as a horizontal edge on this plane: its direction and length there.
+          std::optional<Eigen::Vector3d> u[2];
+          double length[2] = {0, 0};
+          for (int k = 0; k < 2; ++k) {
+            const auto q = on_plane(corner.arm_end[static_cast<size_t>(k)], z);
+            if (!q) continue;
+            Eigen::Vector3d d = *q - P;
+            d.z() = 0;
+            length[k] = d.norm();
+            if (length[k] > 1e-3) u[k] = d / length[k];
+          }
+          auto fits = [&](int axis, double l) { return l <= kLengthSlack * s[axis] + kLengthSlackM; };
+          // Two horizontal arms: perpendicular on the plane.
+          if (u[0] && u[1] && std::abs(u[0]->dot(*u[1])) <= sin_perpendicular) {
+            // Share the misfit between the arms: the yaw halfway.
+            const double side = u[0]->cross(*u[1]).z() >= 0 ? 1.0 : -1.0;
+            const Eigen::Vector3d u1_turned = Eigen::AngleAxisd(-side * M_PI / 2, Eigen::Vector3d::UnitZ()) * *u[1];
+            const Eigen::Vector3d first = (*u[0] + u1_turned).normalized();
+            const Eigen::Vector3d second = Eigen::AngleAxisd(side * M_PI / 2, Eigen::Vector3d::UnitZ()) * first;
+            for (int swap = 0; swap < 2; ++swap) {
+              const int i = swap ? r.b : r.a, j = swap ? r.a : r.b;
+              if (fits(i, length[0]) && fits(j, length[1])) {
+                emit(r, i, j, P, first, second, bottom, static_cast<int>(c), static_cast<int>(p));
+              }
+            }
+          }
+          // One vertical arm (up from a bottom corner, down from a top corner) and one horizontal.
+          for (int v = 0; v < 2; ++v) {
+            const int hz = 1 - v;
+            if (vertical[v] != (bottom ? 1 : -1) || !u[hz]) continue;
+            const Eigen::Vector3d Q = P + Eigen::Vector3d::UnitZ() * (bottom ? s[r.up] : -s[r.up]);
+            const double edge_px = (project(Q) - corner.point).norm();
+            const double arm_px = (corner.arm_end[static_cast<size_t>(v)] - corner.point).norm();
+            if (arm_px > kLengthSlack * edge_px + 3) continue;
+            const Eigen::Vector3d across = Eigen::Vector3d::UnitZ().cross(*u[hz]);
+            for (int swap = 0; swap < 2; ++swap) {
+              const int i = swap ? r.b : r.a, j = swap ? r.a : r.b;
+              if (!fits(i, length[hz])) continue;
+              for (double sign : {1.0, -1.0}) {
+                emit(r, i, j, P, *u[hz], sign * across, bottom, static_cast<int>(c), static_cast<int>(p));
+              }
+            }
+          }
+        }
+      }
+    }
+  }
+
+  // The best few per model and place.
+  std::stable_sort(all.begin(), all.end(),
+                   [](const SupportHypothesis& a, const SupportHypothesis& b) { return a.score > b.score; });
+  std::vector<SupportHypothesis> kept;
+  for (const SupportHypothesis& h : all) {
+    if (static_cast<int>(kept.size()) >= options.max_support_hypotheses) break;
+    const double near_m = 0.25 * models.models[static_cast<size_t>(h.model)].box_size_m.minCoeff();
+    bool repeat = false;
+    for (const SupportHypothesis& k : kept) repeat = repeat || SamePlace(h, k, near_m);
+    if (!repeat) kept.push_back(h);
+  }
+  return kept;
+}
+
+}  // namespace teachsim::vision
