@@ -15,6 +15,10 @@
 #include <limits>
 #include <utility>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace teachsim::geometry {
 
 namespace {
@@ -332,6 +336,147 @@ inline int BoxSupport(double dx, double dy, double dz) {
   return (dx > 0.0 ? 1 : 0) | (dy > 0.0 ? 2 : 0) | (dz > 0.0 ? 4 : 0);
 }
 
+// A hull's vertices as three columns (x, y, z), padded to a multiple of four with copies of the
+// last vertex, for the support scan of cold queries. A cold query scans every vertex at each of
+// its support queries (convex-convex bench, 8-40 vertices: about six per polyhedron), so one
+// copy per query pays for itself: the scan then needs no shuffles and runs four vertices per step.
+struct VertexColumns {
+  static constexpr int kCapacity = (ConvexPolyhedron::kMaxHullPoints + 3) / 4 * 4;
+  alignas(16) double x[kCapacity];
+  alignas(16) double y[kCapacity];
+  alignas(16) double z[kCapacity];
+  int n = 0;       // vertices
+  int padded = 0;  // n rounded up to a multiple of 4
+
+  // False (and nothing copied) when p has more vertices than fit. With r and t, each vertex x is
+  // stored as r x + t (B's columns placed in A's frame, once per query: then each support query
+  // needs neither the direction turned into B's frame nor its vertex turned back, two matrix
+  // products off the chain of dependent steps that a GJK iteration is).
+  bool Fill(const ConvexPolyhedron& p, const Eigen::Matrix3d* r = nullptr,
+            const Eigen::Vector3d* t = nullptr) {
+    n = static_cast<int>(p.vertices().size());
+    if (n < 1 || n > kCapacity) return false;
+    padded = (n + 3) & ~3;
+    const double* v = p.vertices().front().data();  // x y z per vertex (Eigen::Vector3d is packed)
+    static_assert(sizeof(Eigen::Vector3d) == 3 * sizeof(double));
+    int i = 0;
+#if defined(__SSE2__)
+    // Two vertices from three loads, (x0 y0) (z0 x1) (y1 z1), into (x0 x1) (y0 y1) (z0 z1).
+    auto columns = [&](int at, __m128d* cx, __m128d* cy, __m128d* cz) {
+      const __m128d m0 = _mm_loadu_pd(v + 3 * at), m1 = _mm_loadu_pd(v + 3 * at + 2),
+                    m2 = _mm_loadu_pd(v + 3 * at + 4);
+      *cx = _mm_shuffle_pd(m0, m1, 0b10);
+      *cy = _mm_shuffle_pd(m0, m2, 0b01);
+      *cz = _mm_shuffle_pd(m1, m2, 0b10);
+    };
+    if (r == nullptr) {
+      for (; i + 2 <= n; i += 2) {
+        __m128d cx, cy, cz;
+        columns(i, &cx, &cy, &cz);
+        _mm_store_pd(x + i, cx);
+        _mm_store_pd(y + i, cy);
+        _mm_store_pd(z + i, cz);
+      }
+    } else {
+      const Eigen::Matrix3d& m = *r;
+      auto row = [&](int k, __m128d cx, __m128d cy, __m128d cz) {
+        return _mm_add_pd(
+            _mm_add_pd(_mm_add_pd(_mm_mul_pd(_mm_set1_pd(m(k, 0)), cx), _mm_mul_pd(_mm_set1_pd(m(k, 1)), cy)),
+                       _mm_mul_pd(_mm_set1_pd(m(k, 2)), cz)),
+            _mm_set1_pd((*t)[k]));
+      };
+      for (; i + 2 <= n; i += 2) {
+        __m128d cx, cy, cz;
+        columns(i, &cx, &cy, &cz);
+        _mm_store_pd(x + i, row(0, cx, cy, cz));
+        _mm_store_pd(y + i, row(1, cx, cy, cz));
+        _mm_store_pd(z + i, row(2, cx, cy, cz));
+      }
+    }
+#endif
+    for (; i < n; ++i) {
+      const double px = v[3 * i], py = v[3 * i + 1], pz = v[3 * i + 2];
+      if (r == nullptr) {
+        x[i] = px;
+        y[i] = py;
+        z[i] = pz;
+      } else {
+        const Eigen::Matrix3d& m = *r;
+        x[i] = m(0, 0) * px + m(0, 1) * py + m(0, 2) * pz + t->x();
+        y[i] = m(1, 0) * px + m(1, 1) * py + m(1, 2) * pz + t->y();
+        z[i] = m(2, 0) * px + m(2, 1) * py + m(2, 2) * pz + t->z();
+      }
+    }
+    for (i = n; i < padded; ++i) {
+      x[i] = x[n - 1];
+      y[i] = y[n - 1];
+      z[i] = z[n - 1];
+    }
+    return true;
+  }
+
+  Eigen::Vector3d Point(int i) const { return {x[i], y[i], z[i]}; }
+
+  // The vertex with the largest dot product with d, the first one on ties (as
+  // ConvexPolyhedron::Support: each dot product is summed as (x dx + y dy) + z dz).
+  int Support(const Eigen::Vector3d& d) const {
+#if defined(__SSE2__)
+    // Two vertices per SSE2 register (the baseline x86-64 ISA), two registers in flight: four
+    // short dependency chains for the running maxima instead of one long one; the lanes merge
+    // with selects, no data-dependent branch (the maximum's position is unpredictable).
+    const __m128d dx = _mm_set1_pd(d.x()), dy = _mm_set1_pd(d.y()), dz = _mm_set1_pd(d.z());
+    __m128d best0 = _mm_set1_pd(-std::numeric_limits<double>::infinity()), best1 = best0;
+    // Per lane, the first index of the group of four where the lane's maximum was last raised:
+    // groups only increase, so max(group, better & next group) keeps it without a select.
+    __m128d group0 = _mm_setzero_pd(), group1 = group0;
+    __m128d at = _mm_setzero_pd();
+    const __m128d step = _mm_set1_pd(4.0);
+    for (int i = 0; i < padded; i += 4) {
+      const __m128d d0 =
+          _mm_add_pd(_mm_add_pd(_mm_mul_pd(_mm_load_pd(x + i), dx), _mm_mul_pd(_mm_load_pd(y + i), dy)),
+                     _mm_mul_pd(_mm_load_pd(z + i), dz));
+      const __m128d d1 = _mm_add_pd(
+          _mm_add_pd(_mm_mul_pd(_mm_load_pd(x + i + 2), dx), _mm_mul_pd(_mm_load_pd(y + i + 2), dy)),
+          _mm_mul_pd(_mm_load_pd(z + i + 2), dz));
+      const __m128d better0 = _mm_cmpgt_pd(d0, best0), better1 = _mm_cmpgt_pd(d1, best1);
+      best0 = _mm_max_pd(d0, best0);  // d where d > best, as `better` says
+      best1 = _mm_max_pd(d1, best1);
+      group0 = _mm_max_pd(group0, _mm_and_pd(better0, at));
+      group1 = _mm_max_pd(group1, _mm_and_pd(better1, at));
+      at = _mm_add_pd(at, step);
+    }
+    // Lane l of register r holds vertex 4 group + 2 r + l.
+    __m128d index0 = _mm_add_pd(group0, _mm_set_pd(1.0, 0.0));
+    const __m128d index1 = _mm_add_pd(group1, _mm_set_pd(3.0, 2.0));
+    auto select = [](__m128d mask, __m128d yes, __m128d no) {
+      return _mm_or_pd(_mm_and_pd(mask, yes), _mm_andnot_pd(mask, no));
+    };
+    // Merge the lanes: the larger dot product, the lower index on ties.
+    auto take = [](__m128d dot, __m128d index, __m128d best, __m128d best_index) {
+      return _mm_or_pd(_mm_cmpgt_pd(dot, best),
+                       _mm_and_pd(_mm_cmpeq_pd(dot, best), _mm_cmplt_pd(index, best_index)));
+    };
+    const __m128d take1 = take(best1, index1, best0, index0);
+    best0 = select(take1, best1, best0);
+    index0 = select(take1, index1, index0);
+    const __m128d best_high = _mm_unpackhi_pd(best0, best0), index_high = _mm_unpackhi_pd(index0, index0);
+    index0 = select(take(best_high, index_high, best0, index0), index_high, index0);
+    // A padding copy of the last vertex never beats the lower index it copies; min() says so.
+    return std::min(static_cast<int>(_mm_cvtsd_f64(index0)), n - 1);
+#else
+    int best = 0;
+    double best_dot = -std::numeric_limits<double>::infinity();
+    for (int i = 0; i < n; ++i) {
+      const double dot = x[i] * d.x() + y[i] * d.y() + z[i] * d.z();
+      const bool better = dot > best_dot;
+      best_dot = better ? dot : best_dot;
+      best = better ? i : best;
+    }
+    return best;
+#endif
+  }
+};
+
 // Closest-feature tracking for two boxes (I-COLLIDE, paper §5.1): when the previous query's
 // closest features still bound the answer, the distance costs one feature-pair distance and no
 // GJK iteration. A pair is accepted only with the separating-plane certificate GJK uses (each
@@ -365,6 +510,18 @@ inline bool BoxVertexExtreme(int v, const Eigen::Vector3d& d, int skip = -1) {
   return true;
 }
 
+// Three corners of face f of a box that span the triangle holding `point` (box frame, over the
+// face): the quad less its corner farthest from the point, whose in-plane signs are the point's
+// opposites (Box numbers vertices by their signs). A warm GJK restarted from the simplex of a
+// vertex-face pair then starts at the answer.
+inline void FaceTriangle(int f, const Eigen::Vector3d& point, int* corners) {
+  const int k = f >> 1, i = (k + 1) % 3, j = (k + 2) % 3;
+  const int far = ((f & 1) << k) | (point[i] < 0.0 ? 1 << i : 0) | (point[j] < 0.0 ? 1 << j : 0);
+  corners[0] = far ^ (1 << i);
+  corners[1] = far ^ (1 << j);
+  corners[2] = far ^ ((1 << i) | (1 << j));
+}
+
 // Vertex ib of B against face f of A. On a failed support check, *better is B's extreme vertex.
 bool VertexOfBFaceOfA(const BoxPair& p, int ib, int f, FeatureAnswer* out, int* better) {
   const int k = f >> 1;
@@ -387,11 +544,8 @@ bool VertexOfBFaceOfA(const BoxPair& p, int ib, int f, FeatureAnswer* out, int* 
   out->normal = Eigen::Vector3d::Zero();
   out->normal[k] = s;
   out->distance = gap;
-  const std::vector<int>& fv = p.a.faces()[f].vertices;
-  for (int m = 0; m < 3; ++m) {
-    out->simplex_a[m] = fv[m];
-    out->simplex_b[m] = ib;
-  }
+  FaceTriangle(f, q, out->simplex_a);
+  for (int m = 0; m < 3; ++m) out->simplex_b[m] = ib;
   out->simplex_n = 3;
   return true;
 }
@@ -418,11 +572,8 @@ bool FaceOfBVertexOfA(const BoxPair& p, int f, int ia, FeatureAnswer* out, int* 
   out->point_b = x - gap * n_b;
   out->normal = toward_b;
   out->distance = gap;
-  const std::vector<int>& fv = p.b.faces()[f].vertices;
-  for (int m = 0; m < 3; ++m) {
-    out->simplex_a[m] = ia;
-    out->simplex_b[m] = fv[m];
-  }
+  FaceTriangle(f, x_in_b, out->simplex_b);
+  for (int m = 0; m < 3; ++m) out->simplex_a[m] = ia;
   out->simplex_n = 3;
   return true;
 }
@@ -460,8 +611,11 @@ bool EdgeEdge(const BoxPair& p, int ea, int eb, FeatureAnswer* out) {
   out->point_b = q0 + sb * db;
   out->normal = m / norm;
   out->distance = gap;
-  out->simplex_a[0] = edge_a.v0;
-  out->simplex_b[0] = edge_b.v0;
+  // The simplex spans b0 - a0 + t (b1 - b0) - s (a1 - a0) over one of the two triangles of that
+  // parallelogram: the one that holds (sa, sb), so a warm GJK restarted from it starts at the answer.
+  const bool far_half = sa + sb > 1.0;
+  out->simplex_a[0] = far_half ? edge_a.v1 : edge_a.v0;
+  out->simplex_b[0] = far_half ? edge_b.v1 : edge_b.v0;
   out->simplex_a[1] = edge_a.v1;
   out->simplex_b[1] = edge_b.v0;
   out->simplex_a[2] = edge_a.v0;
@@ -681,6 +835,182 @@ bool TrackFeatures(const BoxPair& p, const Feature& fa, const Feature& fb, Featu
   return FacingFaces(p, &face_a, &face_b) && FaceFace(p, face_a, face_b, out);
 }
 
+// B's vertex ib against box A: the feature of A nearest to it (clamping in A's frame: a vertex,
+// an edge or a face by how many coordinates lie outside A's slabs), certified as a tracked pair.
+bool VertexOfBAgainstA(const BoxPair& p, int ib, FeatureAnswer* out) {
+  const Eigen::Vector3d y = p.r_ab * p.b.vertices()[ib] + p.t_ab;
+  int outside = 0, bits = 0;
+  for (int k = 0; k < 3; ++k) {
+    if (y[k] > p.half_a[k]) {
+      outside |= 1 << k;
+      bits |= 1 << k;
+    } else if (y[k] < -p.half_a[k]) {
+      outside |= 1 << k;
+    }
+  }
+  int better = -1;
+  switch (std::popcount(static_cast<unsigned>(outside))) {
+    case 3:
+      return VertexVertex(p, bits, ib, out);
+    case 2: {
+      const int free_axis = std::countr_zero(static_cast<unsigned>(~outside & 7));
+      const int ea = p.a.EdgeBetween(bits, bits | (1 << free_axis));
+      return ea >= 0 && EdgeVertex(p, ea, ib, out);
+    }
+    case 1: {
+      const int k = std::countr_zero(static_cast<unsigned>(outside));
+      return VertexOfBFaceOfA(p, ib, 2 * k + ((bits >> k) & 1), out, &better);
+    }
+    default:
+      return false;  // inside A
+  }
+}
+
+// A's vertex ia against box B, as above in B's frame.
+bool VertexOfAAgainstB(const BoxPair& p, int ia, FeatureAnswer* out) {
+  const Eigen::Vector3d x = p.r_ab.transpose() * (p.a.vertices()[ia] - p.t_ab);
+  int outside = 0, bits = 0;
+  for (int l = 0; l < 3; ++l) {
+    if (x[l] > p.half_b[l]) {
+      outside |= 1 << l;
+      bits |= 1 << l;
+    } else if (x[l] < -p.half_b[l]) {
+      outside |= 1 << l;
+    }
+  }
+  int better = -1;
+  switch (std::popcount(static_cast<unsigned>(outside))) {
+    case 3:
+      return VertexVertex(p, ia, bits, out);
+    case 2: {
+      const int free_axis = std::countr_zero(static_cast<unsigned>(~outside & 7));
+      const int eb = p.b.EdgeBetween(bits, bits | (1 << free_axis));
+      return eb >= 0 && VertexEdge(p, ia, eb, out);
+    }
+    case 1: {
+      const int l = std::countr_zero(static_cast<unsigned>(outside));
+      return FaceOfBVertexOfA(p, 2 * l + ((bits >> l) & 1), ia, out, &better);
+    }
+    default:
+      return false;  // inside B
+  }
+}
+
+// Cold queries on two boxes: the separating axis theorem's 15 axes (A's 3 face normals, B's 3,
+// and the 9 cross products of their edge directions) in A's frame. The axis of largest separation
+// names a feature pair: a face of one box and the other box's extreme vertex along its normal, or
+// an edge of each along their cross product. When the closest features are such a pair (vertex-face
+// and edge-edge, the common cases), that separation is the distance, and the pair functions
+// certify it as they certify tracked features (GJK's separating-plane certificate: exact, never an
+// over-estimate); otherwise (vertex-vertex, vertex-edge) they refuse and GJK decides, starting from
+// the axis. *axis (A's frame, from A toward B) is set whenever the boxes are separated along it.
+bool SeparatingAxisFeatures(const BoxPair& p, int kind, int best_k, int best_l, FeatureAnswer* out,
+                            Eigen::Vector3d* axis);
+
+bool SeparatingAxisPair(const BoxPair& p, FeatureAnswer* out, Eigen::Vector3d* axis) {
+  const Eigen::Matrix3d& r = p.r_ab;
+  const Eigen::Vector3d& t = p.t_ab;
+  const Eigen::Vector3d& ha = p.half_a;
+  const Eigen::Vector3d& hb = p.half_b;
+  const Eigen::Matrix3d abs_r = r.cwiseAbs();
+  enum class Kind { kFaceA, kFaceB, kEdges } kind = Kind::kFaceA;
+  double best = -std::numeric_limits<double>::infinity();
+  int best_k = 0, best_l = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double sep = std::abs(t[k]) - ha[k] - abs_r.row(k).dot(hb);
+    if (sep > best) {
+      best = sep;
+      kind = Kind::kFaceA;
+      best_k = k;
+    }
+  }
+  const Eigen::Vector3d t_in_b = r.transpose() * t;
+  for (int l = 0; l < 3; ++l) {
+    const double sep = std::abs(t_in_b[l]) - hb[l] - abs_r.col(l).dot(ha);
+    if (sep > best) {
+      best = sep;
+      kind = Kind::kFaceB;
+      best_l = l;
+    }
+  }
+  // Edge k of A against edge l of B: n = e_k x r.col(l), |n|^2 = 1 - r(k,l)^2 (Gottschalk's OBB
+  // terms); nearly parallel edges are left to the face axes.
+  for (int k = 0; k < 3; ++k) {
+    const int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+    for (int l = 0; l < 3; ++l) {
+      const double norm2 = 1.0 - r(k, l) * r(k, l);
+      if (!(norm2 > 1e-6)) continue;
+      const int l1 = (l + 1) % 3, l2 = (l + 2) % 3;
+      const double along = t[k2] * r(k1, l) - t[k1] * r(k2, l);
+      const double radii =
+          ha[k1] * abs_r(k2, l) + ha[k2] * abs_r(k1, l) + hb[l1] * abs_r(k, l2) + hb[l2] * abs_r(k, l1);
+      const double sep = (std::abs(along) - radii) / std::sqrt(norm2);
+      if (sep > best) {
+        best = sep;
+        kind = Kind::kEdges;
+        best_k = k;
+        best_l = l;
+      }
+    }
+  }
+  if (!(best > kTouching)) return false;  // touching or overlapping: GJK says which
+  if (SeparatingAxisFeatures(p,
+                             kind == Kind::kFaceA   ? 0
+                             : kind == Kind::kFaceB ? 1
+                                                    : 2,
+                             best_k, best_l, out, axis)) {
+    return true;
+  }
+  // Not a face or edge-edge pair: most often a vertex of one box against a vertex or an edge of
+  // the other. Each box's extreme vertex along the axis, against the other box's nearest feature.
+  const Eigen::Vector3d toward_a = -(r.transpose() * *axis);  // B's frame
+  if (VertexOfBAgainstA(p, BoxSupport(toward_a.x(), toward_a.y(), toward_a.z()), out)) return true;
+  return VertexOfAAgainstB(p, BoxSupport(axis->x(), axis->y(), axis->z()), out);
+}
+
+// The feature pair that SeparatingAxisPair's best axis names (kind 0: A's face axis k, 1: B's face
+// axis l, 2: edge k of A and edge l of B), certified; *axis is set to that axis.
+bool SeparatingAxisFeatures(const BoxPair& p, int kind, int best_k, int best_l, FeatureAnswer* out,
+                            Eigen::Vector3d* axis) {
+  const Eigen::Matrix3d& r = p.r_ab;
+  const Eigen::Vector3d& t = p.t_ab;
+  int better = -1;
+  switch (kind) {
+    case 0: {
+      const int k = best_k;
+      const double s = t[k] > 0.0 ? 1.0 : -1.0;  // B beyond A's +k face
+      *axis = Eigen::Vector3d::Zero();
+      (*axis)[k] = s;
+      const Eigen::Vector3d toward_a = -s * r.row(k).transpose();  // B's frame
+      const int ib = BoxSupport(toward_a.x(), toward_a.y(), toward_a.z());
+      return VertexOfBFaceOfA(p, ib, 2 * k + (t[k] > 0.0 ? 1 : 0), out, &better);
+    }
+    case 1: {
+      const int l = best_l;
+      // B's face whose outward normal points back toward A.
+      const double s = r.col(l).dot(t) < 0.0 ? 1.0 : -1.0;
+      const Eigen::Vector3d toward_b = -s * r.col(l);  // A's frame
+      *axis = toward_b;
+      const int ia = BoxSupport(toward_b.x(), toward_b.y(), toward_b.z());
+      return FaceOfBVertexOfA(p, 2 * l + (s > 0.0 ? 1 : 0), ia, out, &better);
+    }
+    default: {
+      const int k = best_k, l = best_l;
+      Eigen::Vector3d n = Eigen::Vector3d::Unit(k).cross(r.col(l));
+      if (n.dot(t) < 0.0) n = -n;  // from A toward B
+      *axis = n.normalized();
+      // Each box's edge along its axis k (l) that is extreme along n (-n for B).
+      const int v0 = BoxSupport(n.x(), n.y(), n.z()) & ~(1 << k);
+      const Eigen::Vector3d m = -(r.transpose() * n);
+      const int w0 = BoxSupport(m.x(), m.y(), m.z()) & ~(1 << l);
+      const int ea = p.a.EdgeBetween(v0, v0 | (1 << k));
+      const int eb = p.b.EdgeBetween(w0, w0 | (1 << l));
+      return ea >= 0 && eb >= 0 && EdgeEdge(p, ea, eb, out);
+    }
+  }
+  return false;
+}
+
 // A result from a certified feature pair; the cache then holds a simplex spanning that pair.
 DistanceResult FeatureResult(const Pose3& world_T_a, const FeatureAnswer& answer, DistanceCache* cache) {
   DistanceResult result;
@@ -720,6 +1050,8 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
   const int nb = static_cast<int>(b.vertices().size());
   const bool box_a = a.is_box(), box_b = b.is_box();
 
+  // GJK's first direction (A's frame, from A toward B) when a cold box-box query found one.
+  Eigen::Vector3d start_axis = Eigen::Vector3d::Zero();
   if (box_a && box_b) {
     const BoxPair pair{a, b, r_ab, t_ab, a.local_bounds().max, b.local_bounds().max};
     FeatureAnswer answer;
@@ -731,6 +1063,8 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
                FacingFaces(pair, &face_a, &face_b) && FaceFace(pair, face_a, face_b, &answer)) {
       // Cold, nearly parallel faces: where GJK would walk across the flat simplices.
       return FeatureResult(world_T_a, answer, cache);
+    } else if (SeparatingAxisPair(pair, &answer, &start_axis)) {
+      return FeatureResult(world_T_a, answer, cache);
     }
   }
 
@@ -740,12 +1074,25 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
   // scan is faster (convex-convex bench, 8-40 vertices: about 2x).
   int hint_a = -1, hint_b = -1;
   bool climb = false;
+  // Cold queries scan column copies of the hulls' vertices (see VertexColumns); warm ones climb
+  // from the cached support vertices or scan the few vertices in place.
+  const bool warm = cache != nullptr && cache->count > 0;
+  VertexColumns columns_a, columns_b;
+  const bool scan_a = !box_a && !warm && columns_a.Fill(a);
+  const bool scan_b = !box_b && !warm && columns_b.Fill(b, &r_ab, &t_ab);  // B's columns in A's frame
   // Support of C = B - A in direction d (A's frame): max over B of d.b, min over A of d.a.
   auto support = [&](const Eigen::Vector3d& d) {
     Vertex out;
+    out.ia = box_a    ? BoxSupport(-d.x(), -d.y(), -d.z())
+             : scan_a ? columns_a.Support(-d)
+                      : a.Support(-d, hint_a);
+    if (scan_b) {
+      out.ib = columns_b.Support(d);
+      out.w = columns_b.Point(out.ib) - va[out.ia];
+      return out;
+    }
     const Eigen::Vector3d d_in_b = r_ab.transpose() * d;
     out.ib = box_b ? BoxSupport(d_in_b.x(), d_in_b.y(), d_in_b.z()) : b.Support(d_in_b, hint_b);
-    out.ia = box_a ? BoxSupport(-d.x(), -d.y(), -d.z()) : a.Support(-d, hint_a);
     if (climb) {
       hint_a = out.ia;
       hint_b = out.ib;
@@ -774,8 +1121,10 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
     }
   }
   if (s.n == 0) {
-    // Start from the direction between the centres.
-    Eigen::Vector3d d = (r_ab * b.centroid() + t_ab) - a.centroid();
+    // Start from the separating axis, else the direction between the centres.
+    Eigen::Vector3d d = start_axis.squaredNorm() > 0.0
+                            ? start_axis
+                            : Eigen::Vector3d((r_ab * b.centroid() + t_ab) - a.centroid());
     if (d.squaredNorm() < 1e-30) d = Eigen::Vector3d::UnitX();
     s.v[0] = support(-d);
     s.n = 1;
@@ -788,14 +1137,19 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
   double lower = 0.0;
   int iterations = 0;
   bool robust = false;  // switched to the careful sub-solver after a stall
-  double previous_norm = std::numeric_limits<double>::infinity();
+  double previous_norm2 = std::numeric_limits<double>::infinity();
   while (!inside && iterations < kMaxIterations) {
     ++iterations;
-    const double vnorm = v.norm();
-    if (vnorm <= kTouching) break;
+    const double vnorm2 = v.squaredNorm();
+    if (vnorm2 <= kTouching * kTouching) break;
     const Vertex w = support(-v);
-    lower = std::max(lower, v.dot(w.w) / vnorm);
-    if (vnorm - lower <= kDistanceTolerance) break;
+    const double vw = v.dot(w.w);
+    // The bound itself needs |v| (a square root and a division); the stopping test, written as
+    // |v|^2 - v.w <= tol |v| (the same up to rounding, which only moves the stop), waits for
+    // neither, and the loop runs ahead of them.
+    const double vnorm = std::sqrt(vnorm2);
+    lower = std::max(lower, vw / vnorm);
+    if (vnorm2 - vw <= kDistanceTolerance * vnorm && vnorm - lower <= kDistanceTolerance) break;
     bool repeated = false;
     for (int i = 0; i < s.n; ++i) repeated = repeated || (s.v[i].ia == w.ia && s.v[i].ib == w.ib);
     if (repeated) {
@@ -823,12 +1177,12 @@ DistanceResult Distance(const ConvexPolyhedron& a, const Pose3& world_T_a, const
         return r;
       }
     }
-    const double norm = v.norm();
-    if (norm >= previous_norm && norm >= vnorm) {
+    const double norm2 = v.squaredNorm();
+    if (norm2 >= previous_norm2 && norm2 >= vnorm2) {
       if (robust) break;  // no progress
       robust = true;
     }
-    previous_norm = std::min(previous_norm, vnorm);
+    previous_norm2 = std::min(previous_norm2, vnorm2);
   }
   // Certificate gap still open (never seen on 1e5 test poses): fall back to the exhaustive
   // feature-pair distance, which is exact.

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
+
 #include "tests/random_poses.h"
 
 namespace teachsim::geometry {
@@ -145,6 +147,93 @@ TEST(Distance, ConvexConvexMatchesOracle) {
     total += s.count;
   }
   EXPECT_EQ(total, 4000);
+}
+
+// Cold box-box queries: the separating axis names a feature pair (a face and the other box's
+// extreme vertex, or an edge of each), else each box's extreme vertex is tried against the other
+// box's nearest feature; GJK's certificate accepts or refuses the pair. Every kind of accepted
+// pair must occur, each matching the oracle with its points on the features it reports.
+TEST(Distance, ColdBoxQueriesAreAnsweredByCertifiedFeaturePairs) {
+  const ConvexPolyhedron cube = Box(0.045, 0.045, 0.045);
+  const ConvexPolyhedron bar = Box(0.09, 0.045, 0.045);
+  const ConvexPolyhedron plate = Box(0.1, 0.06, 0.015);
+  std::map<std::pair<Feature::Type, Feature::Type>, int> by_pair;
+  int total = 0, without_gjk = 0;
+  for (const ConvexPolyhedron* b : {&cube, &bar, &plate}) {
+    std::vector<testing::PosePair> poses = MakePoses(cube, *b, PoseSet::kRandom, 3000, 5000 + total);
+    const auto motion = MakeMotion(cube, *b, 1000, 6000 + total);
+    poses.insert(poses.end(), motion.begin(), motion.end());
+    double max_over = 0.0, max_under = 0.0, max_off = 0.0;
+    for (const auto& p : poses) {
+      const DistanceResult d = Distance(cube, p.a, *b, p.b);
+      const double oracle = DistanceBruteForce(cube, p.a, *b, p.b);
+      ASSERT_FALSE(d.intersecting);
+      max_over = std::max(max_over, d.distance - oracle);
+      max_under = std::max(max_under, oracle - d.distance);
+      EXPECT_NEAR((d.point_b - d.point_a).norm(), d.upper_bound, 1e-12);
+      max_off = std::max({max_off, OffFeature(cube, p.a, d.feature_a, d.point_a),
+                          OffFeature(*b, p.b, d.feature_b, d.point_b)});
+      if (d.iterations == 0) {
+        ++without_gjk;
+        ++by_pair[{d.feature_a.type, d.feature_b.type}];
+      }
+      ++total;
+    }
+    EXPECT_LE(max_over, 1e-9);
+    EXPECT_LE(max_under, 1e-9);
+    EXPECT_LE(max_off, 1e-9);
+  }
+  std::printf("%d of %d cold box-box queries answered by a certified feature pair without GJK\n", without_gjk,
+              total);
+  EXPECT_GT(without_gjk, total * 3 / 4);
+  using T = Feature::Type;
+  for (const auto& pair : {std::pair{T::kFace, T::kVertex}, std::pair{T::kVertex, T::kFace},
+                           std::pair{T::kEdge, T::kEdge}, std::pair{T::kVertex, T::kVertex},
+                           std::pair{T::kVertex, T::kEdge}, std::pair{T::kEdge, T::kVertex}}) {
+    EXPECT_GT(by_pair[pair], 0) << "feature pair " << static_cast<int>(pair.first) << "-"
+                                << static_cast<int>(pair.second);
+  }
+}
+
+// n points on a sphere (a Fibonacci lattice): a hull with exactly n vertices.
+std::vector<Eigen::Vector3d> SpherePoints(int n, double radius) {
+  std::vector<Eigen::Vector3d> points;
+  const double golden = M_PI * (3.0 - std::sqrt(5.0));
+  for (int i = 0; i < n; ++i) {
+    const double z = 1.0 - 2.0 * (i + 0.5) / n, r = std::sqrt(1.0 - z * z);
+    points.push_back(radius * Eigen::Vector3d(r * std::cos(golden * i), r * std::sin(golden * i), z));
+  }
+  return points;
+}
+
+// Cold hull queries scan a column copy of each hull's vertices, padded to a multiple of four (B's
+// placed in A's frame): every vertex count (each remainder mod 4, small and large hulls, a box
+// against a hull either way round) gives the oracle's distance and the warm query's answer.
+TEST(Distance, ColdHullQueriesMatchOracleForEveryVertexCount) {
+  std::mt19937_64 rng(17);
+  const ConvexPolyhedron cube = Box(0.045, 0.045, 0.045);
+  int total = 0;
+  for (int n : {4, 5, 6, 7, 8, 9, 10, 11, 13, 40, 61, 64}) {
+    const ConvexPolyhedron a = ConvexPolyhedron::Hull(SpherePoints(n, 0.02)).value();
+    ASSERT_EQ(a.vertices().size(), static_cast<std::size_t>(n));
+    const ConvexPolyhedron b =
+        ConvexPolyhedron::Hull(testing::RandomConvexPoints(rng, 8 + n % 5, 0.03)).value();
+    for (const auto& [first, second] :
+         {std::pair{&a, &b}, std::pair{&b, &a}, std::pair{&a, &cube}, std::pair{&cube, &a}}) {
+      const auto poses = MakePoses(*first, *second, PoseSet::kRandom, 150, 7000 + total);
+      const Stats s = Check(*first, *second, poses, /*warm=*/false);
+      EXPECT_LE(s.max_over, 1e-9) << n << " vertices";
+      EXPECT_LE(s.max_under, 1e-9) << n << " vertices";
+      for (const auto& p : poses) {
+        DistanceCache cache;
+        const DistanceResult cold = Distance(*first, p.a, *second, p.b, &cache);
+        const DistanceResult warm = Distance(*first, p.a, *second, p.b, &cache);  // support by hill climb
+        EXPECT_NEAR(cold.distance, warm.distance, 1e-10);
+      }
+      total += s.count;
+    }
+  }
+  EXPECT_EQ(total, 12 * 4 * 150);
 }
 
 TEST(Distance, WarmStartGivesTheColdAnswerInFewerIterations) {
