@@ -5,6 +5,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -427,6 +428,19 @@ Result<Recognizer> Recognizer::Create(const ModelLibrary& models, const Recogniz
 
 namespace {
 
+// A pose whose RMS is within the limit only over each predicted edge's closest segments must have
+// this much of its outline matched by lines, this much edge support along its whole outline, and no
+// more image edges running on past its corners.
+constexpr double kTrimmedMinMatchedFraction = 0.5;
+constexpr double kTrimmedMinCoverage = 0.65;
+constexpr int kTrimmedMaxContinuedEnds = 1;
+// Occlusion consistency: a recognition that would hide this many samples (2.5 px apart) of an accepted
+// recognition's predicted edges where the image shows an edge is not there.
+constexpr int kMaxHiddenSupportedSamples = 12;
+// Part of a larger straight-edged thing: image edges run on past this many of the pose's edge ends
+// (over most of the edge's length) while its outline's support (coverage) is under this.
+constexpr int kPartMinContinuedEnds = 2;
+constexpr double kPartMaxCoverage = 0.62;
 using Clock = std::chrono::steady_clock;
 double Ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
 
@@ -561,6 +575,146 @@ Support EdgeSupport(const Model& model, const Camera& camera, const geometry::Po
   out.coverage = out.samples > 0 ? static_cast<double>(supported) / out.samples : 0;
   out.supported_px = supported * kSpacingPx;
   return out;
+}
+// The ranking of the non-maximum suppression: supported length less the unsupported length of the
+// predicted outline, so that of two poses explaining the same image edges the one that predicts less
+// outline where the image shows nothing (an upright slab over a cube and the table) comes first. By
+// supported length times support fraction, the benchmark's demo (cornering, seed 7) lost the cube to
+// such a slab.
+double NetSupportPx(const Support& s) { return s.supported_px * (2 - 1 / std::max(s.coverage, 1e-3)); }
+
+// Image edges that run on past the ends of the predicted edges: a block's visible edges end at its
+// corners, but a smaller wrong model fitted onto part of a real block (a cube on a bar) or onto the
+// straight sides of the dark cylinder ends where the real thing's edges go on. Counts the ends of
+// visible predicted edges (40 px long or more) whose collinear continuation beyond the corner, from
+// 5 px on over relative_length times the edge's length (20 to 80 px), is supported by Canny edges
+// across it at min_share of the samples or more.
+int ContinuedEdgeEnds(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                      const EdgeMap& edge_map, double min_share, double relative_length) {
+  const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
+  const double cos_tol = std::cos(25 * M_PI / 180);
+  constexpr double kStartPx = 5, kSpacingPx = 2, kMinEdgePx = 40, kMinRunPx = 20, kMaxRunPx = 80;
+  int continued = 0;
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    for (int end = 0; end < 2; ++end) {
+      const Eigen::Vector3d v = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][end]);
+      const Eigen::Vector3d w = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][1 - end]);
+      const auto pv = camera.ProjectFromCamera(v), pin = camera.ProjectFromCamera(v + 0.05 * (w - v));
+      const auto pw = camera.ProjectFromCamera(w);
+      if (!pv || !pin || !pw) continue;
+      const double edge_px = (*pw - *pv).norm();
+      if (edge_px < kMinEdgePx) continue;
+      const double run_px = std::clamp(relative_length * edge_px, kMinRunPx, kMaxRunPx);
+      const Eigen::Vector2d out = (*pv - *pin).normalized();
+      const Eigen::Vector2d normal(-out.y(), out.x());
+      int samples = 0, supported = 0;
+      for (double d = kStartPx; d <= kStartPx + run_px; d += kSpacingPx) {
+        const Eigen::Vector2d c = *pv + d * out;
+        if (!camera.InImage(c)) continue;
+        ++samples;
+        bool ok = false;
+        for (int o = 0; o <= 4 && !ok; ++o) {
+          const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
+          const int x = static_cast<int>(std::lround(c.x() + offset * normal.x()));
+          const int y = static_cast<int>(std::lround(c.y() + offset * normal.y()));
+          if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
+          if (!edge_map.edges.at<uint8_t>(y, x)) continue;
+          const float a = edge_map.direction.at<float>(y, x);
+          ok = std::abs(std::cos(a) * normal.x() + std::sin(a) * normal.y()) >= cos_tol;
+        }
+        supported += ok ? 1 : 0;
+      }
+      if (samples >= 6 && supported >= min_share * samples) ++continued;
+    }
+  }
+  return continued;
+}
+
+// The matches that lie on their predicted edge: per edge, the segments no farther from it than its
+// closest segment plus kSpreadPx. A shadow or grain line running beside a real edge (3-6 px off,
+// within the match distance) is then left out of the RMS when the edge's own line was found.
+std::vector<LineMatch> ClosestMatchesPerEdge(const Model& model, const Eigen::Matrix3d& K,
+                                             const geometry::Pose3& camera_T_object,
+                                             const std::vector<LineMatch>& matches) {
+  constexpr double kSpreadPx = 1.0;
+  std::array<double, 12> closest;
+  closest.fill(1e300);
+  std::vector<double> offset(matches.size());
+  for (size_t i = 0; i < matches.size(); ++i) {
+    const LineMatch& m = matches[i];
+    const Eigen::Vector3d p = K * (camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[m.edge][0]));
+    const Eigen::Vector3d q = K * (camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[m.edge][1]));
+    const Eigen::Vector2d a = p.head<2>() / p.z(), b = q.head<2>() / q.z();
+    const Eigen::Vector2d dir = (b - a).normalized(), n(-dir.y(), dir.x());
+    offset[i] = 0.5 * (std::abs(n.dot(m.a - a)) + std::abs(n.dot(m.b - a)));
+    closest[static_cast<size_t>(m.edge)] = std::min(closest[static_cast<size_t>(m.edge)], offset[i]);
+  }
+  std::vector<LineMatch> out;
+  for (size_t i = 0; i < matches.size(); ++i) {
+    if (offset[i] <= closest[static_cast<size_t>(matches[i].edge)] + kSpreadPx) out.push_back(matches[i]);
+  }
+  return out;
+}
+
+// Occlusion consistency: the samples of `behind`'s predicted edges that show an image edge (as in
+// EdgeSupport) but that `front`, were it there, would hide (the ray from the camera to the edge
+// point passes through front's box, shrunk by kHideMarginM so that edges on front's own outline
+// and edges touching it do not count). A pose that would hide edges the image shows is wrong.
+int HiddenSupportedSamples(const Model& behind_model, const geometry::Pose3& camera_T_behind, const Model& front_model,
+                           const geometry::Pose3& camera_T_front, const Camera& camera, const EdgeMap& edge_map) {
+  constexpr double kHideMarginM = 0.004, kSpacingPx = 2.5;
+  const Eigen::Vector3d half = 0.5 * front_model.box_size_m - Eigen::Vector3d::Constant(kHideMarginM);
+  if ((half.array() <= 0).any()) return 0;
+  const geometry::Pose3 front_T_camera = camera_T_front.Inverse();
+  const Eigen::Vector3d origin = front_T_camera.translation;
+  const uint16_t visible = VisibleBoxEdges(behind_model.box_size_m, camera_T_behind.Inverse().translation);
+  const double cos_tol = std::cos(25 * M_PI / 180);
+  int hidden = 0;
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    const Eigen::Vector3d p = camera_T_behind * BoxVertex(behind_model.box_size_m, kBoxEdges[e][0]);
+    const Eigen::Vector3d q = camera_T_behind * BoxVertex(behind_model.box_size_m, kBoxEdges[e][1]);
+    const auto pp = camera.ProjectFromCamera(p), pq = camera.ProjectFromCamera(q);
+    if (!pp || !pq) continue;
+    const int n = std::max(4, static_cast<int>(((*pq - *pp).norm()) / kSpacingPx));
+    for (int i = 0; i < n; ++i) {
+      const double t = 0.08 + 0.84 * (i + 0.5) / n;
+      const Eigen::Vector3d point = p + t * (q - p);
+      // Segment camera -> point against the shrunk box (slab test), in front's frame.
+      const Eigen::Vector3d target = front_T_camera * point;
+      const Eigen::Vector3d d = target - origin;
+      double t0 = 0, t1 = 1;
+      for (int a = 0; a < 3 && t0 <= t1; ++a) {
+        if (std::abs(d[a]) < 1e-12) {
+          if (std::abs(origin[a]) > half[a]) t1 = -1;
+          continue;
+        }
+        double ta = (-half[a] - origin[a]) / d[a], tb = (half[a] - origin[a]) / d[a];
+        if (ta > tb) std::swap(ta, tb);
+        t0 = std::max(t0, ta);
+        t1 = std::min(t1, tb);
+      }
+      if (t0 > t1) continue;
+      const auto c = camera.ProjectFromCamera(point);
+      const auto c2 = camera.ProjectFromCamera(p + (t + 0.01) * (q - p));
+      if (!c || !c2 || !camera.InImage(*c)) continue;
+      const Eigen::Vector2d along = (*c2 - *c).normalized();
+      const Eigen::Vector2d normal(-along.y(), along.x());
+      bool ok = false;
+      for (int o = 0; o <= 4 && !ok; ++o) {
+        const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
+        const int x = static_cast<int>(std::lround(c->x() + offset * normal.x()));
+        const int y = static_cast<int>(std::lround(c->y() + offset * normal.y()));
+        if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
+        if (!edge_map.edges.at<uint8_t>(y, x)) continue;
+        const float a = edge_map.direction.at<float>(y, x);
+        ok = std::abs(std::cos(a) * normal.x() + std::sin(a) * normal.y()) >= cos_tol;
+      }
+      hidden += ok ? 1 : 0;
+    }
+  }
+  return hidden;
 }
 
 struct Candidate {
@@ -895,9 +1049,22 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       reject(Outcome::kMatchedFraction);
       return;
     }
-    // RMS of the matched segments against the final pose (all of them: a robust RMS over the
-    // close ones raised recall on the renders from 76 to 94 of 193 but false positives fivefold).
-    fit.rms_px = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, set.matches, 0, 0).rms_px;
+    // RMS of the matched segments against the final pose, all of them; when only the segments
+    // closest to each predicted edge are within the limit (a shadow or grain line runs beside an
+    // edge), the pose must show stronger evidence: support along most of the predicted outline and
+    // no image edges running on past its corners (a wrong, smaller model fitted onto part of a
+    // real block). Benchmark's renders: all of them, 102 of 193 found (>= 0.7 visible); the closest
+    // ones alone, 122 but false positives 0.12 -> 0.68 per image; with these checks (and the
+    // occlusion test and ranking in the selection below), 118 and 0.05 false positives per image
+    // (the dev set unchanged: 30 of 38, none false).
+    const double rms_all = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, set.matches, 0, 0).rms_px;
+    bool trimmed_rms = false;
+    fit.rms_px = rms_all;
+    if (rms_all > options_.max_reprojection_rms_px) {
+      const std::vector<LineMatch> closest = ClosestMatchesPerEdge(model, K, fit.camera_T_object, set.matches);
+      fit.rms_px = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, closest, 0, 0).rms_px;
+      trimmed_rms = true;
+    }
     if (fit.rms_px > options_.max_reprojection_rms_px) {
       reject(Outcome::kReprojection);
       return;
@@ -905,6 +1072,20 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     const Support support = EdgeSupport(model, camera, fit.camera_T_object, detection.edge_map,
                                         options_.min_edge_contrast);
     if (support.fraction < options_.min_score || support.coverage < options_.min_coverage) {
+      reject(Outcome::kSupport);
+      return;
+    }
+    const int continued_ends = ContinuedEdgeEnds(model, camera, fit.camera_T_object, detection.edge_map, 0.8, 0);
+    if (trimmed_rms && (set.matched_fraction < kTrimmedMinMatchedFraction || support.coverage < kTrimmedMinCoverage ||
+                        continued_ends > kTrimmedMaxContinuedEnds)) {
+      reject(Outcome::kSupport);
+      return;
+    }
+    // Part of a larger straight-edged thing (a cube fitted onto a bar, an upright block onto the
+    // dark cylinder): image edges run on past two or more of its corners for most of the edge's
+    // length, while little of its own outline is supported.
+    const int long_continued = ContinuedEdgeEnds(model, camera, fit.camera_T_object, detection.edge_map, 0.7, 0.8);
+    if (long_continued >= kPartMinContinuedEnds && support.coverage < kPartMaxCoverage) {
       reject(Outcome::kSupport);
       return;
     }
@@ -1117,8 +1298,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
   order = supported_subset(order);
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return candidates[a].support.supported_px * candidates[a].support.fraction >
-           candidates[b].support.supported_px * candidates[b].support.fraction;
+    return NetSupportPx(candidates[a].support) > NetSupportPx(candidates[b].support);
   });
   std::vector<size_t> accepted;
   for (size_t i : order) {
@@ -1136,6 +1316,10 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       int shared = 0;
       for (int s : c.matches.segments) shared += sa.count(s) ? 1 : 0;
       if (shared * 3 > static_cast<int>(c.matches.segments.size())) conflict = true;
+      if (HiddenSupportedSamples(ma, a.camera_T_object, mc, c.camera_T_object, camera, detection.edge_map) >=
+          kMaxHiddenSupportedSamples) {
+        conflict = true;
+      }
       if (conflict) break;
     }
     if (!conflict) accepted.push_back(i);
