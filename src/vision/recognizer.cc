@@ -529,51 +529,68 @@ float SampleGrey(const cv::Mat& m, const Eigen::Vector2d& p) {
   return static_cast<float>((1 - fy) * ((1 - fx) * m.at<uint8_t>(y0, x0) + fx * m.at<uint8_t>(y0, x0 + 1)) +
                             fy * ((1 - fx) * m.at<uint8_t>(y0 + 1, x0) + fx * m.at<uint8_t>(y0 + 1, x0 + 1)));
 }
-Support EdgeSupport(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                    const EdgeMap& edge_map, double min_contrast) {
-  Support out;
-  const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
-  const double cos_tol = std::cos(25 * M_PI / 180);
-  constexpr double kSpacingPx = 2.5, kContrastOffsetPx = 2.5;
-  int supported = 0, informative = 0;
+// Samples every kOutlineSpacingPx along each visible predicted edge of a box in the image (the ends
+// left out: corners blur and shadows meet there): visit(point_in_camera, pixel, normal) with the
+// unit normal to the projected edge.
+constexpr double kOutlineSpacingPx = 2.5;
+template <typename Visit>
+void ForEachOutlineSample(const Eigen::Vector3d& box_size_m, const geometry::Pose3& camera_T_object, const Camera& camera,
+                          Visit&& visit) {
+  const uint16_t visible = VisibleBoxEdges(box_size_m, camera_T_object.Inverse().translation);
   for (int e = 0; e < 12; ++e) {
     if (!(visible >> e & 1)) continue;
-    const Eigen::Vector3d p = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][0]);
-    const Eigen::Vector3d q = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][1]);
+    const Eigen::Vector3d p = camera_T_object * BoxVertex(box_size_m, kBoxEdges[e][0]);
+    const Eigen::Vector3d q = camera_T_object * BoxVertex(box_size_m, kBoxEdges[e][1]);
     const auto pp = camera.ProjectFromCamera(p), pq = camera.ProjectFromCamera(q);
     if (!pp || !pq) continue;
-    const int n = std::max(4, static_cast<int>(((*pq - *pp).norm()) / kSpacingPx));
+    const int n = std::max(4, static_cast<int>(((*pq - *pp).norm()) / kOutlineSpacingPx));
     for (int i = 0; i < n; ++i) {
-      // Skip the ends (corners blur and shadows meet there).
       const double t = 0.08 + 0.84 * (i + 0.5) / n;
-      const auto c = camera.ProjectFromCamera(p + t * (q - p));
+      const Eigen::Vector3d point = p + t * (q - p);
+      const auto c = camera.ProjectFromCamera(point);
       const auto c2 = camera.ProjectFromCamera(p + (t + 0.01) * (q - p));
       if (!c || !c2 || !camera.InImage(*c)) continue;
       const Eigen::Vector2d along = (*c2 - *c).normalized();
-      const Eigen::Vector2d normal(-along.y(), along.x());
-      ++out.samples;
-      bool ok = false;
-      for (int o = 0; o <= 4 && !ok; ++o) {
-        const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
-        const int x = static_cast<int>(std::lround(c->x() + offset * normal.x()));
-        const int y = static_cast<int>(std::lround(c->y() + offset * normal.y()));
-        if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
-        if (!edge_map.edges.at<uint8_t>(y, x)) continue;
-        const float a = edge_map.direction.at<float>(y, x);
-        ok = std::abs(std::cos(a) * normal.x() + std::sin(a) * normal.y()) >= cos_tol;
-      }
-      if (ok) {
-        ++supported;
-        ++informative;
-      } else if (std::abs(SampleGrey(edge_map.smoothed, *c + kContrastOffsetPx * normal) -
-                          SampleGrey(edge_map.smoothed, *c - kContrastOffsetPx * normal)) >= min_contrast) {
-        ++informative;
-      }
+      visit(point, *c, Eigen::Vector2d(-along.y(), along.x()));
     }
   }
+}
+
+// A Canny edge within 2 px across the predicted edge at `pixel` whose gradient runs across it (25°).
+bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
+  static const double cos_tol = std::cos(25 * M_PI / 180);
+  for (int o = 0; o <= 4; ++o) {
+    const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
+    const int x = static_cast<int>(std::lround(pixel.x() + offset * normal.x()));
+    const int y = static_cast<int>(std::lround(pixel.y() + offset * normal.y()));
+    if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
+    if (!edge_map.edges.at<uint8_t>(y, x)) continue;
+    const float a = edge_map.direction.at<float>(y, x);
+    if (std::abs(std::cos(a) * normal.x() + std::sin(a) * normal.y()) >= cos_tol) return true;
+  }
+  return false;
+}
+
+Support EdgeSupport(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                    const EdgeMap& edge_map, double min_contrast) {
+  Support out;
+  constexpr double kContrastOffsetPx = 2.5;
+  int supported = 0, informative = 0;
+  ForEachOutlineSample(model.box_size_m, camera_T_object, camera,
+                       [&](const Eigen::Vector3d&, const Eigen::Vector2d& c, const Eigen::Vector2d& normal) {
+                         ++out.samples;
+                         if (EdgeAcross(edge_map, c, normal)) {
+                           ++supported;
+                           ++informative;
+                         } else if (std::abs(SampleGrey(edge_map.smoothed, c + kContrastOffsetPx * normal) -
+                                             SampleGrey(edge_map.smoothed, c - kContrastOffsetPx * normal)) >=
+                                    min_contrast) {
+                           ++informative;
+                         }
+                       });
   out.fraction = informative > 0 ? static_cast<double>(supported) / informative : 0;
   out.coverage = out.samples > 0 ? static_cast<double>(supported) / out.samples : 0;
-  out.supported_px = supported * kSpacingPx;
+  out.supported_px = supported * kOutlineSpacingPx;
   return out;
 }
 // The ranking of the non-maximum suppression: supported length less the unsupported length of the
@@ -592,7 +609,6 @@ double NetSupportPx(const Support& s) { return s.supported_px * (2 - 1 / std::ma
 int ContinuedEdgeEnds(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                       const EdgeMap& edge_map, double min_share, double relative_length) {
   const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
-  const double cos_tol = std::cos(25 * M_PI / 180);
   constexpr double kStartPx = 5, kSpacingPx = 2, kMinEdgePx = 40, kMinRunPx = 20, kMaxRunPx = 80;
   int continued = 0;
   for (int e = 0; e < 12; ++e) {
@@ -613,17 +629,7 @@ int ContinuedEdgeEnds(const Model& model, const Camera& camera, const geometry::
         const Eigen::Vector2d c = *pv + d * out;
         if (!camera.InImage(c)) continue;
         ++samples;
-        bool ok = false;
-        for (int o = 0; o <= 4 && !ok; ++o) {
-          const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
-          const int x = static_cast<int>(std::lround(c.x() + offset * normal.x()));
-          const int y = static_cast<int>(std::lround(c.y() + offset * normal.y()));
-          if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
-          if (!edge_map.edges.at<uint8_t>(y, x)) continue;
-          const float a = edge_map.direction.at<float>(y, x);
-          ok = std::abs(std::cos(a) * normal.x() + std::sin(a) * normal.y()) >= cos_tol;
-        }
-        supported += ok ? 1 : 0;
+        supported += EdgeAcross(edge_map, c, normal) ? 1 : 0;
       }
       if (samples >= 6 && supported >= min_share * samples) ++continued;
     }
@@ -663,57 +669,31 @@ std::vector<LineMatch> ClosestMatchesPerEdge(const Model& model, const Eigen::Ma
 // and edges touching it do not count). A pose that would hide edges the image shows is wrong.
 int HiddenSupportedSamples(const Model& behind_model, const geometry::Pose3& camera_T_behind, const Model& front_model,
                            const geometry::Pose3& camera_T_front, const Camera& camera, const EdgeMap& edge_map) {
-  constexpr double kHideMarginM = 0.004, kSpacingPx = 2.5;
+  constexpr double kHideMarginM = 0.004;
   const Eigen::Vector3d half = 0.5 * front_model.box_size_m - Eigen::Vector3d::Constant(kHideMarginM);
   if ((half.array() <= 0).any()) return 0;
   const geometry::Pose3 front_T_camera = camera_T_front.Inverse();
   const Eigen::Vector3d origin = front_T_camera.translation;
-  const uint16_t visible = VisibleBoxEdges(behind_model.box_size_m, camera_T_behind.Inverse().translation);
-  const double cos_tol = std::cos(25 * M_PI / 180);
   int hidden = 0;
-  for (int e = 0; e < 12; ++e) {
-    if (!(visible >> e & 1)) continue;
-    const Eigen::Vector3d p = camera_T_behind * BoxVertex(behind_model.box_size_m, kBoxEdges[e][0]);
-    const Eigen::Vector3d q = camera_T_behind * BoxVertex(behind_model.box_size_m, kBoxEdges[e][1]);
-    const auto pp = camera.ProjectFromCamera(p), pq = camera.ProjectFromCamera(q);
-    if (!pp || !pq) continue;
-    const int n = std::max(4, static_cast<int>(((*pq - *pp).norm()) / kSpacingPx));
-    for (int i = 0; i < n; ++i) {
-      const double t = 0.08 + 0.84 * (i + 0.5) / n;
-      const Eigen::Vector3d point = p + t * (q - p);
-      // Segment camera -> point against the shrunk box (slab test), in front's frame.
-      const Eigen::Vector3d target = front_T_camera * point;
-      const Eigen::Vector3d d = target - origin;
-      double t0 = 0, t1 = 1;
-      for (int a = 0; a < 3 && t0 <= t1; ++a) {
-        if (std::abs(d[a]) < 1e-12) {
-          if (std::abs(origin[a]) > half[a]) t1 = -1;
-          continue;
+  ForEachOutlineSample(
+      behind_model.box_size_m, camera_T_behind, camera,
+      [&](const Eigen::Vector3d& point, const Eigen::Vector2d& c, const Eigen::Vector2d& normal) {
+        // Segment camera -> point against the shrunk box (slab test), in front's frame.
+        const Eigen::Vector3d target = front_T_camera * point;
+        const Eigen::Vector3d d = target - origin;
+        double t0 = 0, t1 = 1;
+        for (int a = 0; a < 3 && t0 <= t1; ++a) {
+          if (std::abs(d[a]) < 1e-12) {
+            if (std::abs(origin[a]) > half[a]) t1 = -1;
+            continue;
+          }
+          double ta = (-half[a] - origin[a]) / d[a], tb = (half[a] - origin[a]) / d[a];
+          if (ta > tb) std::swap(ta, tb);
+          t0 = std::max(t0, ta);
+          t1 = std::min(t1, tb);
         }
-        double ta = (-half[a] - origin[a]) / d[a], tb = (half[a] - origin[a]) / d[a];
-        if (ta > tb) std::swap(ta, tb);
-        t0 = std::max(t0, ta);
-        t1 = std::min(t1, tb);
-      }
-      if (t0 > t1) continue;
-      const auto c = camera.ProjectFromCamera(point);
-      const auto c2 = camera.ProjectFromCamera(p + (t + 0.01) * (q - p));
-      if (!c || !c2 || !camera.InImage(*c)) continue;
-      const Eigen::Vector2d along = (*c2 - *c).normalized();
-      const Eigen::Vector2d normal(-along.y(), along.x());
-      bool ok = false;
-      for (int o = 0; o <= 4 && !ok; ++o) {
-        const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
-        const int x = static_cast<int>(std::lround(c->x() + offset * normal.x()));
-        const int y = static_cast<int>(std::lround(c->y() + offset * normal.y()));
-        if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
-        if (!edge_map.edges.at<uint8_t>(y, x)) continue;
-        const float a = edge_map.direction.at<float>(y, x);
-        ok = std::abs(std::cos(a) * normal.x() + std::sin(a) * normal.y()) >= cos_tol;
-      }
-      hidden += ok ? 1 : 0;
-    }
-  }
+        if (t0 <= t1 && EdgeAcross(edge_map, c, normal)) ++hidden;
+      });
   return hidden;
 }
 
