@@ -556,21 +556,6 @@ void ForEachOutlineSample(const Eigen::Vector3d& box_size_m, const geometry::Pos
   }
 }
 
-// A Canny edge within 2 px across the predicted edge at `pixel` whose gradient runs across it (25°).
-bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
-  static const double cos_tol = std::cos(25 * M_PI / 180);
-  for (int o = 0; o <= 4; ++o) {
-    const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
-    const int x = static_cast<int>(std::lround(pixel.x() + offset * normal.x()));
-    const int y = static_cast<int>(std::lround(pixel.y() + offset * normal.y()));
-    if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
-    if (!edge_map.edges.at<uint8_t>(y, x)) continue;
-    const float a = edge_map.direction.at<float>(y, x);
-    if (std::abs(std::cos(a) * normal.x() + std::sin(a) * normal.y()) >= cos_tol) return true;
-  }
-  return false;
-}
-
 Support EdgeSupport(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                     const EdgeMap& edge_map, double min_contrast) {
   Support out;

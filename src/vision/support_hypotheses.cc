@@ -33,7 +33,6 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
     if (!p) return 0;
     px[i] = *p;
   }
-  const double cos_tol = std::cos(25 * M_PI / 180);
   int samples = 0, supported = 0;
   for (int e = 0; e < 12; ++e) {
     if (!(visible >> e & 1)) continue;
@@ -46,18 +45,7 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
       const Eigen::Vector2d c = a + (0.08 + 0.84 * (i + 0.5) / n) * (b - a);
       if (!camera.InImage(c)) continue;
       ++samples;
-      for (int o = 0; o <= 4; ++o) {
-        const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
-        const int x = static_cast<int>(std::lround(c.x() + offset * normal.x()));
-        const int y = static_cast<int>(std::lround(c.y() + offset * normal.y()));
-        if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
-        if (!edge_map.edges.at<uint8_t>(y, x)) continue;
-        const float g = edge_map.direction.at<float>(y, x);
-        if (std::abs(std::cos(g) * normal.x() + std::sin(g) * normal.y()) >= cos_tol) {
-          ++supported;
-          break;
-        }
-      }
+      if (EdgeAcross(edge_map, c, normal)) ++supported;
     }
   }
   return samples >= 8 ? static_cast<double>(supported) / samples : 0;

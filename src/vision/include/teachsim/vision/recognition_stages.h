@@ -35,6 +35,9 @@ struct EdgeMap {
   cv::Mat direction;  // CV_32F, gradient direction at edge pixels, rad in (-pi, pi]
   cv::Mat smoothed;   // CV_8U, the image after the Gaussian (contrast across predicted edges)
 };
+// Whether a predicted edge through `pixel` (distorted image; `normal` its unit normal) has a Canny
+// edge pixel within 2 px across it whose gradient runs across it (within 25 deg): edge support.
+bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal);
 struct LineDetection {
   EdgeMap edge_map;
   std::vector<ImageLine> lines;  // undistorted px
