@@ -33,8 +33,8 @@ struct ExtrinsicsArgs {
   double max_rms_px = 2.0;
   double click_sigma_px = 0.5;
   // Off by default: it needs the image to show the corners' edges unobstructed. On rendered
-  // work-site images it puts the camera within 2 mm in ~82 % of trials against 47 % for 0.5 px clicks
-  // (docs/formats/calibration.md has the figures), but not yet in the 95 %.
+  // work-site images, with clicks 0.5 px off, it puts the camera within 2 mm in 88 % of trials
+  // against 47 % unsnapped (docs/formats/calibration.md has the figures), not yet the 95 %.
   bool snap = false;
   double drop_beyond_sigmas = 4;
   std::string snap_method = "lines";
