@@ -835,19 +835,26 @@ bool TrackFeatures(const BoxPair& p, const Feature& fa, const Feature& fb, Featu
   return FacingFaces(p, &face_a, &face_b) && FaceFace(p, face_a, face_b, out);
 }
 
+// Where a point lies against a box's slabs (box frame, half sizes `half`): bit k of *outside is set
+// when coordinate k is beyond a slab, bit k of *bits when beyond the + side (a vertex index's bit).
+void SlabRegion(const Eigen::Vector3d& point, const Eigen::Vector3d& half, int* outside, int* bits) {
+  *outside = 0;
+  *bits = 0;
+  for (int k = 0; k < 3; ++k) {
+    if (point[k] > half[k]) {
+      *outside |= 1 << k;
+      *bits |= 1 << k;
+    } else if (point[k] < -half[k]) {
+      *outside |= 1 << k;
+    }
+  }
+}
+
 // B's vertex ib against box A: the feature of A nearest to it (clamping in A's frame: a vertex,
 // an edge or a face by how many coordinates lie outside A's slabs), certified as a tracked pair.
 bool VertexOfBAgainstA(const BoxPair& p, int ib, FeatureAnswer* out) {
-  const Eigen::Vector3d y = p.r_ab * p.b.vertices()[ib] + p.t_ab;
   int outside = 0, bits = 0;
-  for (int k = 0; k < 3; ++k) {
-    if (y[k] > p.half_a[k]) {
-      outside |= 1 << k;
-      bits |= 1 << k;
-    } else if (y[k] < -p.half_a[k]) {
-      outside |= 1 << k;
-    }
-  }
+  SlabRegion(p.r_ab * p.b.vertices()[ib] + p.t_ab, p.half_a, &outside, &bits);
   int better = -1;
   switch (std::popcount(static_cast<unsigned>(outside))) {
     case 3:
@@ -868,16 +875,8 @@ bool VertexOfBAgainstA(const BoxPair& p, int ib, FeatureAnswer* out) {
 
 // A's vertex ia against box B, as above in B's frame.
 bool VertexOfAAgainstB(const BoxPair& p, int ia, FeatureAnswer* out) {
-  const Eigen::Vector3d x = p.r_ab.transpose() * (p.a.vertices()[ia] - p.t_ab);
   int outside = 0, bits = 0;
-  for (int l = 0; l < 3; ++l) {
-    if (x[l] > p.half_b[l]) {
-      outside |= 1 << l;
-      bits |= 1 << l;
-    } else if (x[l] < -p.half_b[l]) {
-      outside |= 1 << l;
-    }
-  }
+  SlabRegion(p.r_ab.transpose() * (p.a.vertices()[ia] - p.t_ab), p.half_b, &outside, &bits);
   int better = -1;
   switch (std::popcount(static_cast<unsigned>(outside))) {
     case 3:
