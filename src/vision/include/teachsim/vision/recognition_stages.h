@@ -93,6 +93,34 @@ FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K
                          const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
                          int max_iterations, double huber_px);
 
+// Image lines matched to the predicted visible edges of a box at a pose (undistorted px): each
+// line to the nearest edge within max_distance_px and max_angle_rad, overlapping it by half its length.
+struct EdgeMatchSet {
+  std::vector<LineMatch> matches;
+  std::vector<int> segments;      // the image line of each match
+  double matched_fraction = 0;    // of the visible predicted length
+  double visible_length_px = 0;
+};
+EdgeMatchSet MatchEdges(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_object,
+                        const std::vector<ImageLine>& lines, double max_distance_px, double max_angle_rad);
+// A hypothesis fitted (hypothesis_fit.cc): the final pose, whether a round found fewer than 3
+// matched edges (or the pose went behind the camera), and the pose after each round (for traces).
+struct HypothesisFit {
+  FitResult fit;
+  bool failed = false;
+  std::vector<geometry::Pose3> rounds;
+};
+// A support-plane hypothesis: fitted on its plane (x, y, yaw) in three rounds matching within 2, 1.5
+// and 1 times options.match_distance_px, then (options.support_refine_6dof) in 6 DOF, the free pose
+// kept when it matches at least as much of the outline with no larger residual.
+HypothesisFit FitSupportHypothesis(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
+                                   const geometry::Pose3& initial, const std::vector<ImageLine>& lines,
+                                   const RecognizerOptions& options);
+// An index hypothesis: first on its group's own correspondences (seed_matches), then three rounds on
+// the predicted edges' matches within 3, 1.5 and 1 times options.match_distance_px.
+HypothesisFit FitIndexHypothesis(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& initial,
+                                 const std::vector<LineMatch>& seed_matches, const std::vector<ImageLine>& lines,
+                                 const RecognizerOptions& options);
 // ---- a second hypothesis source beside the index (paper §7.1: several groupings in parallel;
 // §4.3: objects rest on the table): a block at rest stands on one of its faces on a horizontal
 // support plane, so its pose has 3 DOF (x, y, yaw) per resting face, and one image corner (an L
