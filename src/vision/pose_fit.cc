@@ -1,7 +1,9 @@
 // Item 4 of issue 7: Lowe's iterative least-squares fit of a 3D model to image lines (Lowe, PAMI
 // 1991; paper §4.1): the perpendicular distances of each image segment's endpoints to the
 // projection of its model edge, minimised over the 6 pose parameters by Gauss-Newton (Levenberg
-// damped), with Huber weights against wrong matches. And the separating-axis penetration test the
+// damped) with the analytic Jacobian, with Huber or Tukey weights against wrong matches (the
+// Jacobian by central differences took half the recognizer's time: bench recognize's median per
+// render 42 -> 25 ms, same recognitions). And the separating-axis penetration test the
 // verification and the model editor use.
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
@@ -26,33 +28,75 @@ geometry::Pose3 Perturb(const geometry::Pose3& pose, const Vector6d& delta) {
   return {(dq * pose.rotation).normalized(), pose.translation + delta.head<3>()};
 }
 
-// Residuals (px) of every match at a pose: two per match, endpoint a then b.
+Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d s;
+  s << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return s;
+}
+
+// Residuals (px) of every match at a pose: two per match, endpoint a then b; and, when J is given,
+// their derivatives by the pose perturbation of Perturb (translation, then rotation vector, camera
+// axes). The residual is the signed distance of an endpoint to the line through the projected edge:
+// with the edge's ends p1, p2 in the camera frame, the interpretation plane's normal n = p1 x p2
+// maps to the pixel line l = K^-T n, and r = l . (u, v, 1) / |l_xy| (Lowe 1991).
 void Residuals(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K_inv_t, const geometry::Pose3& camera_T_object,
-               const std::vector<LineMatch>& matches, Eigen::VectorXd* r) {
-  r->resize(static_cast<Eigen::Index>(2 * matches.size()));
+               const std::vector<LineMatch>& matches, Eigen::VectorXd* r, Eigen::Matrix<double, Eigen::Dynamic, 6>* J) {
+  const Eigen::Index m = static_cast<Eigen::Index>(2 * matches.size());
+  r->resize(m);
+  if (J != nullptr) J->resize(m, 6);
+  const Eigen::Matrix3d R = camera_T_object.RotationMatrix();
+  const Eigen::Vector3d& t = camera_T_object.translation;
   for (size_t i = 0; i < matches.size(); ++i) {
-    const LineMatch& m = matches[i];
-    const Eigen::Vector3d p1 = camera_T_object * BoxVertex(size_m, kBoxEdges[static_cast<size_t>(m.edge)][0]);
-    const Eigen::Vector3d p2 = camera_T_object * BoxVertex(size_m, kBoxEdges[static_cast<size_t>(m.edge)][1]);
-    // The interpretation plane's normal, mapped to the pixel line through the edge's projection.
+    const LineMatch& match = matches[i];
+    const Eigen::Vector3d q1 = R * BoxVertex(size_m, kBoxEdges[static_cast<size_t>(match.edge)][0]);
+    const Eigen::Vector3d q2 = R * BoxVertex(size_m, kBoxEdges[static_cast<size_t>(match.edge)][1]);
+    const Eigen::Vector3d p1 = q1 + t, p2 = q2 + t;
     const Eigen::Vector3d l = K_inv_t * p1.cross(p2);
     const double norm = std::max(std::sqrt(l.x() * l.x() + l.y() * l.y()), 1e-300);
-    (*r)(static_cast<Eigen::Index>(2 * i)) = (l.x() * m.a.x() + l.y() * m.a.y() + l.z()) / norm;
-    (*r)(static_cast<Eigen::Index>(2 * i + 1)) = (l.x() * m.b.x() + l.y() * m.b.y() + l.z()) / norm;
+    const Eigen::Vector3d ua(match.a.x(), match.a.y(), 1), ub(match.b.x(), match.b.y(), 1);
+    const double ra = l.dot(ua) / norm, rb = l.dot(ub) / norm;
+    const Eigen::Index row = static_cast<Eigen::Index>(2 * i);
+    (*r)(row) = ra;
+    (*r)(row + 1) = rb;
+    if (J == nullptr) continue;
+    // dn/d(translation) = -[p2 - p1]x; dn/d(rotation) = [p2]x [q1]x - [p1]x [q2]x.
+    Eigen::Matrix<double, 3, 6> dn;
+    dn.leftCols<3>() = -Skew(p2 - p1);
+    dn.rightCols<3>() = Skew(p2) * Skew(q1) - Skew(p1) * Skew(q2);
+    const Eigen::Matrix<double, 3, 6> dl = K_inv_t * dn;
+    // r = l.u / |l_xy|: dr/dl = u / |l_xy| - r l_xy / |l_xy|^2.
+    const Eigen::Vector3d lxy(l.x() / (norm * norm), l.y() / (norm * norm), 0);
+    J->row(row) = (ua / norm - ra * lxy).transpose() * dl;
+    J->row(row + 1) = (ub / norm - rb * lxy).transpose() * dl;
   }
 }
 
-double HuberWeight(double r, double k) { return k <= 0 || std::abs(r) <= k ? 1.0 : k / std::abs(r); }
+// The robust loss of a residual and its IRLS weight: Huber (linear beyond k) or Tukey's biweight
+// (no pull at all beyond k: a shadow or grain line k px beside an edge is ignored).
+double LossCost(double r, const RobustLoss& loss) {
+  const double a = std::abs(r), k = loss.scale_px;
+  if (k <= 0) return a * a;
+  if (loss.kind == RobustLoss::Kind::kHuber) return a <= k ? a * a : k * (2 * a - k);
+  if (a >= k) return k * k / 3;
+  const double u = 1 - (a / k) * (a / k);
+  return k * k / 3 * (1 - u * u * u);  // twice Tukey's rho, so that it is r^2 near 0 as the others
+}
+double LossWeight(double r, const RobustLoss& loss) {
+  const double a = std::abs(r), k = loss.scale_px;
+  if (k <= 0) return 1.0;
+  if (loss.kind == RobustLoss::Kind::kHuber) return a <= k ? 1.0 : k / a;
+  if (a >= k) return 0.0;
+  const double u = 1 - (a / k) * (a / k);
+  return u * u;
+}
 
-}  // namespace
-
-namespace {
-
-// Levenberg-damped Gauss-Newton with Huber weights over N pose parameters; perturb(pose, delta)
-// applies a parameter step. Shared by the 6-DOF fit and the 3-DOF fit on a support plane.
-template <int N, typename Perturbation>
+// Levenberg-damped Gauss-Newton with robust weights over N pose parameters: the 6-DOF perturbation
+// restricted to the columns of `basis` (6 x N; the identity for the free fit). Shared by the 6-DOF
+// fit and the 3-DOF fit on a support plane.
+template <int N>
 FitResult FitLm(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_object_initial,
-                const std::vector<LineMatch>& matches, int max_iterations, double huber_px, Perturbation perturb) {
+                const std::vector<LineMatch>& matches, int max_iterations, const RobustLoss& loss,
+                const Eigen::Matrix<double, 6, N>& basis) {
   using VectorNd = Eigen::Matrix<double, N, 1>;
   using MatrixNd = Eigen::Matrix<double, N, N>;
   FitResult out;
@@ -61,39 +105,25 @@ FitResult FitLm(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const g
   if (matches.empty()) return out;
   const Eigen::Matrix3d K_inv_t = K.inverse().transpose();
   const Eigen::Index m = static_cast<Eigen::Index>(2 * matches.size());
-  Eigen::VectorXd r(m), rp(m), rm(m), w(m);
+  Eigen::VectorXd r(m), rp(m), w(m);
+  Eigen::Matrix<double, Eigen::Dynamic, 6> J6(m, 6);
   Eigen::Matrix<double, Eigen::Dynamic, N> J(m, N);
 
   auto cost = [&](const Eigen::VectorXd& res) {
     double c = 0;
-    for (Eigen::Index i = 0; i < res.size(); ++i) {
-      const double a = std::abs(res(i));
-      c += huber_px > 0 && a > huber_px ? huber_px * (2 * a - huber_px) : a * a;
-    }
+    for (Eigen::Index i = 0; i < res.size(); ++i) c += LossCost(res(i), loss);
     return c;
-  };
-  auto jacobian = [&](const geometry::Pose3& pose) {
-    // Central differences: 2N evaluations of a handful of residuals, cheaper to write than to
-    // get wrong analytically, and exact enough that the fit converges to 1e-9.
-    constexpr double kStep = 1e-7;
-    for (int k = 0; k < N; ++k) {
-      VectorNd d = VectorNd::Zero();
-      d(k) = kStep;
-      Residuals(size_m, K_inv_t, perturb(pose, d), matches, &rp);
-      d(k) = -kStep;
-      Residuals(size_m, K_inv_t, perturb(pose, d), matches, &rm);
-      J.col(k) = (rp - rm) / (2 * kStep);
-    }
   };
 
   geometry::Pose3 pose = camera_T_object_initial;
-  Residuals(size_m, K_inv_t, pose, matches, &r);
+  Residuals(size_m, K_inv_t, pose, matches, &r, nullptr);
   double current = cost(r);
   double lambda = 1e-6;
   for (int it = 0; it < max_iterations; ++it) {
     out.iterations = it + 1;
-    jacobian(pose);
-    for (Eigen::Index i = 0; i < m; ++i) w(i) = HuberWeight(r(i), huber_px);
+    Residuals(size_m, K_inv_t, pose, matches, &r, &J6);
+    J.noalias() = J6 * basis;
+    for (Eigen::Index i = 0; i < m; ++i) w(i) = LossWeight(r(i), loss);
     const MatrixNd H = J.transpose() * w.asDiagonal() * J;
     const VectorNd g = J.transpose() * (w.asDiagonal() * r);
     bool improved = false;
@@ -104,12 +134,12 @@ FitResult FitLm(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const g
       A.diagonal() += lambda * (H.diagonal().array() + 1e-12).matrix();
       step = -A.ldlt().solve(g);
       if (!step.allFinite()) break;
-      const geometry::Pose3 trial = perturb(pose, step);
+      const geometry::Pose3 trial = Perturb(pose, basis * step);
       if (trial.translation.z() <= 1e-4) {  // behind the camera: damp harder
         lambda *= 10;
         continue;
       }
-      Residuals(size_m, K_inv_t, trial, matches, &rp);
+      Residuals(size_m, K_inv_t, trial, matches, &rp, nullptr);
       const double c = cost(rp);
       if (c <= current) {
         pose = trial;
@@ -133,58 +163,74 @@ FitResult FitLm(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const g
   return out;
 }
 
+// The inverse of the weighted normal matrix at the pose, scaled by the residual variance.
+Matrix6d Covariance(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_object,
+                    const std::vector<LineMatch>& matches, const RobustLoss& loss) {
+  const Eigen::Matrix3d K_inv_t = K.inverse().transpose();
+  const Eigen::Index m = static_cast<Eigen::Index>(2 * matches.size());
+  Eigen::VectorXd r(m);
+  Eigen::Matrix<double, Eigen::Dynamic, 6> J(m, 6);
+  Residuals(size_m, K_inv_t, camera_T_object, matches, &r, &J);
+  Eigen::VectorXd w(m);
+  for (Eigen::Index i = 0; i < m; ++i) w(i) = LossWeight(r(i), loss);
+  const Matrix6d H = J.transpose() * w.asDiagonal() * J;
+  double weighted = 0;
+  int counted = 0;  // residuals with a weight (Tukey's rejected ones carry no information)
+  for (Eigen::Index i = 0; i < m; ++i) weighted += w(i) * r(i) * r(i), counted += w(i) > 0 ? 1 : 0;
+  const double dof = std::max(1.0, counted - 6.0);
+  // Floor at (0.1 px)^2: a noise-free fit would claim a zero covariance.
+  const double sigma2 = std::max(weighted / dof, 0.01);
+  Eigen::FullPivLU<Matrix6d> lu(H);
+  return lu.isInvertible() ? Matrix6d(sigma2 * lu.inverse())
+                           : Matrix6d(Matrix6d::Identity() * std::numeric_limits<double>::infinity());
+}
+
+// The 3 parameters of a pose on its support plane (world x, y and a turn about the world's vertical
+// through the object's centre) as columns of the 6-DOF perturbation: a move by R_cw (dx, dy, 0) and
+// a rotation vector R_cw (0, 0, dyaw) in camera axes give exactly the pose moved on the plane.
+Eigen::Matrix<double, 6, 3> PlaneBasis(const geometry::Pose3& camera_T_world) {
+  const Eigen::Matrix3d R = camera_T_world.RotationMatrix();
+  Eigen::Matrix<double, 6, 3> basis = Eigen::Matrix<double, 6, 3>::Zero();
+  basis.block<3, 1>(0, 0) = R.col(0);
+  basis.block<3, 1>(0, 1) = R.col(1);
+  basis.block<3, 1>(3, 2) = R.col(2);
+  return basis;
+}
+
 }  // namespace
 
 FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
                          const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
                          int max_iterations, double huber_px) {
-  FitResult out = FitLm<6>(size_m, K, camera_T_object_initial, matches, max_iterations, huber_px, Perturb);
+  return FitPoseToLines(size_m, K, camera_T_object_initial, matches, max_iterations,
+                        RobustLoss{RobustLoss::Kind::kHuber, huber_px});
+}
+
+FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
+                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
+                         int max_iterations, const RobustLoss& loss) {
+  FitResult out = FitLm<6>(size_m, K, camera_T_object_initial, matches, max_iterations, loss,
+                           Eigen::Matrix<double, 6, 6>::Identity());
   if (matches.empty()) return out;
-  // Covariance: the inverse of the weighted normal matrix, scaled by the residual variance.
-  const Eigen::Matrix3d K_inv_t = K.inverse().transpose();
-  const Eigen::Index m = static_cast<Eigen::Index>(2 * matches.size());
-  Eigen::VectorXd r(m), rp(m), rm(m);
-  Eigen::Matrix<double, Eigen::Dynamic, 6> J(m, 6);
-  Residuals(size_m, K_inv_t, out.camera_T_object, matches, &r);
-  for (int k = 0; k < 6; ++k) {
-    Vector6d d = Vector6d::Zero();
-    d(k) = 1e-7;
-    Residuals(size_m, K_inv_t, Perturb(out.camera_T_object, d), matches, &rp);
-    d(k) = -1e-7;
-    Residuals(size_m, K_inv_t, Perturb(out.camera_T_object, d), matches, &rm);
-    J.col(k) = (rp - rm) / 2e-7;
-  }
-  Eigen::VectorXd w(m);
-  for (Eigen::Index i = 0; i < m; ++i) w(i) = HuberWeight(r(i), huber_px);
-  const Matrix6d H = J.transpose() * w.asDiagonal() * J;
-  double weighted = 0;
-  for (Eigen::Index i = 0; i < m; ++i) weighted += w(i) * r(i) * r(i);
-  const double dof = std::max<double>(1.0, static_cast<double>(m) - 6.0);
-  // Floor at (0.1 px)^2: a noise-free fit would claim a zero covariance.
-  const double sigma2 = std::max(weighted / dof, 0.01);
-  Eigen::FullPivLU<Matrix6d> lu(H);
-  out.covariance_camera = lu.isInvertible() ? Matrix6d(sigma2 * lu.inverse())
-                                            : Matrix6d(Matrix6d::Identity() * std::numeric_limits<double>::infinity());
+  out.covariance_camera = Covariance(size_m, K, out.camera_T_object, matches, loss);
   return out;
 }
 
 FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
                          const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
                          int max_iterations, double huber_px) {
-  // Parameters: a translation along world x, y and a turn about the world's vertical through the
-  // object's centre; the height and the tilt stay as the support gave them.
-  const geometry::Pose3 world_T_camera = camera_T_world.Inverse();
-  auto perturb = [&](const geometry::Pose3& camera_T_object, const Eigen::Vector3d& d) {
-    geometry::Pose3 world_T_object = world_T_camera * camera_T_object;
-    world_T_object.rotation = (Eigen::Quaterniond(Eigen::AngleAxisd(d.z(), Eigen::Vector3d::UnitZ())) *
-                               world_T_object.rotation).normalized();
-    world_T_object.translation += Eigen::Vector3d(d.x(), d.y(), 0);
-    return camera_T_world * world_T_object;
-  };
-  FitResult out = FitLm<3>(size_m, K, camera_T_object_initial, matches, max_iterations, huber_px, perturb);
+  return FitPoseOnPlane(size_m, K, camera_T_world, camera_T_object_initial, matches, max_iterations,
+                        RobustLoss{RobustLoss::Kind::kHuber, huber_px});
+}
+
+FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
+                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
+                         int max_iterations, const RobustLoss& loss) {
+  // The height and the tilt stay as the support gave them.
+  FitResult out = FitLm<3>(size_m, K, camera_T_object_initial, matches, max_iterations, loss, PlaneBasis(camera_T_world));
   if (matches.empty()) return out;
   // The covariance of the full pose at the constrained optimum (what the recognition reports).
-  out.covariance_camera = FitPoseToLines(size_m, K, out.camera_T_object, matches, 0, huber_px).covariance_camera;
+  out.covariance_camera = Covariance(size_m, K, out.camera_T_object, matches, loss);
   return out;
 }
 

@@ -51,28 +51,88 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
   return samples >= 8 ? static_cast<double>(supported) / samples : 0;
 }
 
-// Equal poses of a box up to the signs of its axes (the symmetries every box has), for thinning.
-bool SamePlace(const SupportHypothesis& a, const SupportHypothesis& b, double distance_m) {
+// Equal poses of a box up to its symmetries (SymmetricRotationAngle: the signs of its axes, and
+// quarter turns about an axis whose other two sides are equal), for thinning: a corner of a block
+// with a square face gives each pose twice, with the two equal axes swapped.
+bool SamePlace(const Model& model, const SupportHypothesis& a, const SupportHypothesis& b, double distance_m) {
   if (a.model != b.model || (a.world_T_object.translation - b.world_T_object.translation).norm() > distance_m) {
     return false;
   }
-  const Eigen::Matrix3d ra = a.world_T_object.RotationMatrix(), rb = b.world_T_object.RotationMatrix();
-  const double cos_tol = std::cos(10 * M_PI / 180);
-  for (int c = 0; c < 3; ++c) {
-    if (std::abs(ra.col(c).dot(rb.col(c))) < cos_tol) return false;
-  }
-  return true;
+  return SymmetricRotationAngle(model, a.world_T_object, b.world_T_object) < 10 * M_PI / 180;
 }
+
+// JoinCollinearLines: the pieces of one edge are this close to one line and this far apart at most.
+constexpr double kCollinearPx = 1.5, kCollinearDeg = 3, kJoinGapPx = 40;
 
 }  // namespace
 
-std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& lines, const RecognizerOptions& options) {
+JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines) {
+  const int n = static_cast<int>(lines.size());
+  std::vector<int> parent(static_cast<size_t>(n));
+  for (int i = 0; i < n; ++i) parent[static_cast<size_t>(i)] = i;
+  auto find = [&](int i) {
+    while (parent[static_cast<size_t>(i)] != i) i = parent[static_cast<size_t>(i)] = parent[static_cast<size_t>(parent[static_cast<size_t>(i)])];
+    return i;
+  };
+  const double cos_tol = std::cos(kCollinearDeg * M_PI / 180);
+  for (int i = 0; i < n; ++i) {
+    const ImageLine& li = lines[static_cast<size_t>(i)];
+    const double length_i = li.Length();
+    if (length_i < 1e-9) continue;
+    const Eigen::Vector2d di = (li.b - li.a) / length_i;
+    for (int j = i + 1; j < n; ++j) {
+      const ImageLine& lj = lines[static_cast<size_t>(j)];
+      const double length_j = lj.Length();
+      if (length_j < 1e-9 || std::abs(di.dot((lj.b - lj.a) / length_j)) < cos_tol) continue;
+      // Each on the other's line (the longer one's line is the better reference).
+      const ImageLine& longer = length_i >= length_j ? li : lj;
+      const ImageLine& shorter = length_i >= length_j ? lj : li;
+      const Eigen::Vector2d dl = (longer.b - longer.a).normalized(), nl(-dl.y(), dl.x());
+      if (std::abs(nl.dot(shorter.a - longer.a)) > kCollinearPx || std::abs(nl.dot(shorter.b - longer.a)) > kCollinearPx) continue;
+      // The gap between them along the line (negative: they overlap).
+      const double ta = di.dot(lj.a - li.a), tb = di.dot(lj.b - li.a);
+      const double gap = std::max(std::min(ta, tb) - length_i, -std::max(ta, tb));
+      if (gap > kJoinGapPx) continue;
+      parent[static_cast<size_t>(find(j))] = find(i);
+    }
+  }
+  JoinedLines out;
+  out.representative.assign(static_cast<size_t>(n), -1);
+  out.extent = lines;
+  std::vector<std::vector<int>> members(static_cast<size_t>(n));
+  for (int i = 0; i < n; ++i) members[static_cast<size_t>(find(i))].push_back(i);
+  for (const std::vector<int>& m : members) {
+    if (m.empty()) continue;
+    int longest = m[0];
+    for (int i : m) {
+      if (lines[static_cast<size_t>(i)].Length() > lines[static_cast<size_t>(longest)].Length()) longest = i;
+    }
+    const ImageLine& l = lines[static_cast<size_t>(longest)];
+    const Eigen::Vector2d d = (l.b - l.a).normalized();
+    double lo = 0, hi = l.Length();
+    for (int i : m) {
+      for (const Eigen::Vector2d& p : {lines[static_cast<size_t>(i)].a, lines[static_cast<size_t>(i)].b}) {
+        lo = std::min(lo, d.dot(p - l.a));
+        hi = std::max(hi, d.dot(p - l.a));
+      }
+    }
+    for (int i : m) out.representative[static_cast<size_t>(i)] = longest;
+    out.extent[static_cast<size_t>(longest)] = {l.a + lo * d, l.a + hi * d};
+  }
+  return out;
+}
+
+std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& input_lines, const RecognizerOptions& options) {
+  const JoinedLines joined = JoinCollinearLines(input_lines);
+  const std::vector<ImageLine>& lines = joined.extent;
   std::vector<ImageCorner> corners;
   const int n = static_cast<int>(lines.size());
   const double min_sin = std::sin(15.0 * M_PI / 180);
   for (int i = 0; i < n; ++i) {
+    if (joined.representative[static_cast<size_t>(i)] != i) continue;
     const Eigen::Vector2d di = (lines[static_cast<size_t>(i)].b - lines[static_cast<size_t>(i)].a).normalized();
     for (int j = i + 1; j < n; ++j) {
+      if (joined.representative[static_cast<size_t>(j)] != j) continue;
       const Eigen::Vector2d dj = (lines[static_cast<size_t>(j)].b - lines[static_cast<size_t>(j)].a).normalized();
       const double s = Cross2(di, dj);
       if (std::abs(s) < min_sin) continue;
@@ -271,7 +331,7 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     if (static_cast<int>(kept.size()) >= options.max_support_hypotheses) break;
     const double near_m = 0.25 * models.models[static_cast<size_t>(h.model)].box_size_m.minCoeff();
     bool repeat = false;
-    for (const SupportHypothesis& k : kept) repeat = repeat || SamePlace(h, k, near_m);
+    for (const SupportHypothesis& k : kept) repeat = repeat || SamePlace(models.models[static_cast<size_t>(h.model)], h, k, near_m);
     if (!repeat) kept.push_back(h);
   }
   return kept;

@@ -85,6 +85,16 @@ struct FitResult {
 FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
                          const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
                          int max_iterations, double huber_px);
+// The robust loss of the fit's residuals: Huber (linear pull beyond scale_px) or Tukey's biweight
+// (no pull beyond scale_px: a line that far off is ignored); scale_px <= 0: least squares.
+struct RobustLoss {
+  enum class Kind : uint8_t { kHuber, kTukey };
+  Kind kind = Kind::kHuber;
+  double scale_px = 0;
+};
+FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
+                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
+                         int max_iterations, const RobustLoss& loss);
 
 // The same with the object kept on its support plane: 3 parameters (world x, y and a turn about the
 // world's vertical through the object's centre); height and tilt stay as the start gave them. Fewer
@@ -92,6 +102,9 @@ FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K
 FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
                          const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
                          int max_iterations, double huber_px);
+FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
+                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
+                         int max_iterations, const RobustLoss& loss);
 
 // Image lines matched to the predicted visible edges of a box at a pose (undistorted px): each
 // line to the nearest edge within max_distance_px and max_angle_rad, overlapping it by half its length.
@@ -103,6 +116,15 @@ struct EdgeMatchSet {
 };
 EdgeMatchSet MatchEdges(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_object,
                         const std::vector<ImageLine>& lines, double max_distance_px, double max_angle_rad);
+// The matches that lie on their predicted edge at a pose: per edge, the lines whose offset from it
+// (mean endpoint distance) is within spread_px of the edge's closest line's. A shadow, grain line or
+// neighbouring block's edge running beside the edge is left out; a split edge's pieces stay.
+std::vector<LineMatch> OnEdgeMatches(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_object,
+                                     const std::vector<LineMatch>& matches, double spread_px);
+// The image line length a pose explains: the visible predicted edges' length covered by lines
+// within max_distance_px and max_angle_rad (MatchEdges), px.
+double ExplainedLengthPx(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_object,
+                         const std::vector<ImageLine>& lines, double max_distance_px, double max_angle_rad);
 // A hypothesis fitted (hypothesis_fit.cc): the final pose, whether a round found fewer than 3
 // matched edges (or the pose went behind the camera), and the pose after each round (for traces).
 struct HypothesisFit {
@@ -110,14 +132,18 @@ struct HypothesisFit {
   bool failed = false;
   std::vector<geometry::Pose3> rounds;
 };
-// A support-plane hypothesis: fitted on its plane (x, y, yaw) in three rounds matching within 2, 1.5
-// and 1 times options.match_distance_px, then (options.support_refine_6dof) in 6 DOF, the free pose
-// kept when it matches at least as much of the outline with no larger residual.
+// A support-plane hypothesis: fitted on its plane (x, y, yaw) in three rounds matching within 3, 1.5
+// and 1 times options.match_distance_px (each round on the lines on their edges, OnEdgeMatches; the
+// last with Tukey's biweight), ending at the start or round that explains the most line length within
+// 2 px (ExplainedLengthPx); then (options.support_refine_6dof) in 6 DOF, the free pose kept when it
+// matches at least as much of the outline with no larger residual and explains no less.
 HypothesisFit FitSupportHypothesis(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
                                    const geometry::Pose3& initial, const std::vector<ImageLine>& lines,
                                    const RecognizerOptions& options);
 // An index hypothesis: first on its group's own correspondences (seed_matches), then three rounds on
-// the predicted edges' matches within 3, 1.5 and 1 times options.match_distance_px.
+// the predicted edges' matches within 3, 1.5 and 1 times options.match_distance_px (the later two on
+// the lines on their edges, the last with Tukey's biweight), ending at the round that explains the
+// most line length within 2 px.
 HypothesisFit FitIndexHypothesis(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& initial,
                                  const std::vector<LineMatch>& seed_matches, const std::vector<ImageLine>& lines,
                                  const RecognizerOptions& options);
@@ -131,13 +157,24 @@ struct SupportPlane {
   Eigen::Vector2d max_xy = Eigen::Vector2d::Constant(1);
 };
 // Two segments whose ends meet (the lines' intersection within options.junction_gap_px, or a
-// quarter of the shorter segment, of both ends) at more than 15 deg.
+// quarter of the shorter segment, of both ends) at more than 15 deg. The pieces of an edge split by
+// a shadow or a crossing line (collinear within 1.5 px and 3 deg, at most 40 px apart) are joined
+// first: an arm reaches the joined edge's far end, and its segment is the longest piece.
 struct ImageCorner {
   Eigen::Vector2d point = Eigen::Vector2d::Zero();  // the lines' intersection, undistorted px
   std::array<Eigen::Vector2d, 2> arm_end{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};  // far ends, px
   std::array<int, 2> segments{-1, -1};              // indices into the image lines
 };
 std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& lines, const RecognizerOptions& options);
+// The pieces of one straight edge (split where a shadow, a grain line or another block's edge
+// crosses it) joined: lines collinear within 1.5 px and 3 deg whose ends are at most 40 px apart
+// along it. representative[i]: the longest piece of line i's edge; extent[r] for a representative
+// r: the joined edge (end to end, on r's line); other entries: the line itself.
+struct JoinedLines {
+  std::vector<int> representative;
+  std::vector<ImageLine> extent;
+};
+JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines);
 // The image direction (unit, undistorted px) in which a world point at pixel `px` moves when it
 // rises along the world's z axis (towards or away from the vertical vanishing point).
 Eigen::Vector2d UpImageDirection(const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world, const Eigen::Vector2d& px);
