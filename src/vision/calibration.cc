@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
@@ -1091,7 +1092,8 @@ struct StepFit {
 // brightness terms, the line's offset and turn and the blur; the line is parameterized about the
 // band's centre so that offset and turn are nearly independent.
 StepFit FitStep(const IdealPatch& patch, const Eigen::Vector2d& corner, const PredictedEdge& edge,
-                double start_offset, double half_width, int iterations, bool free_turn) {
+                double start_offset, double half_width, int iterations, bool free_turn,
+                double offset_tolerance_px = 0) {
   StepFit fit;
   const Eigen::Vector2d t0 = edge.direction, n0(-t0.y(), t0.x());
   const Eigen::Vector2d centre = corner + t0 * 0.5 * (edge.r_min + edge.r_max);
@@ -1134,9 +1136,13 @@ StepFit FitStep(const IdealPatch& patch, const Eigen::Vector2d& corner, const Pr
     const Eigen::Vector2d nn = std::cos(q(7)) * n0 + std::sin(q(7)) * t0;
     const Eigen::Vector2d dn = -std::sin(q(7)) * n0 + std::cos(q(7)) * t0;
     double sse = 0;
+    // The Jacobian's rows and the residuals, multiplied out at the end (one matrix product is far
+    // cheaper than a rank update per pixel).
+    Eigen::Matrix<double, Eigen::Dynamic, kParams> rows_j;
+    Eigen::VectorXd rows_r;
     if (jtj) {
-      jtj->setZero();
-      jtr->setZero();
+      rows_j.resize(n, kParams);
+      rows_r.resize(n);
     }
     for (int i = 0; i < n; ++i) {
       const Eigen::Vector2d& x = xs[static_cast<std::size_t>(i)];
@@ -1149,14 +1155,15 @@ StepFit FitStep(const IdealPatch& patch, const Eigen::Vector2d& corner, const Pr
       sse += r * r;
       if (jtj) {
         const double k = (bright - dark) * pdf / q(8);
-        Vector j;
-        j << 1 - cdf, (1 - cdf) * along, (1 - cdf) * across, cdf, cdf * along, cdf * across, -k,
+        rows_j.row(i) << 1 - cdf, (1 - cdf) * along, (1 - cdf) * across, cdf, cdf * along, cdf * across, -k,
             k * dn.dot(x), -k * u;
-        jtj->selfadjointView<Eigen::Lower>().rankUpdate(j);
-        *jtr += j * r;
+        rows_r(i) = r;
       }
     }
-    if (jtj) *jtj = jtj->selfadjointView<Eigen::Lower>();
+    if (jtj) {
+      jtj->noalias() = rows_j.transpose().lazyProduct(rows_j);  // small: no blocking
+      *jtr = rows_j.transpose() * rows_r;
+    }
     return sse;
   };
   Matrix jtj;
@@ -1183,7 +1190,10 @@ StepFit FitStep(const IdealPatch& patch, const Eigen::Vector2d& corner, const Pr
       const double next_sse = evaluate(next, nullptr, nullptr);
       if (std::isfinite(next_sse) && next_sse < sse) {
         improved = true;
-        const bool converged = sse - next_sse < 1e-10 * sse;
+        // Converged: the cost no longer falls, or (when asked) the line and blur move by less
+        // than the tolerance.
+        const bool converged = sse - next_sse < 1e-10 * sse ||
+                               (std::abs(step(6)) < offset_tolerance_px && std::abs(step(8)) < offset_tolerance_px);
         p = next;
         sse = evaluate(p, &jtj, &jtr);
         lambda = std::max(1e-7, lambda / 10);
@@ -1399,6 +1409,504 @@ SnapResult SnapToModelCorner(const cv::Mat& gray, const Camera& camera, const Po
   result.offset_px = offset;
   result.sigma_px = std::sqrt(std::max(0.0, covariance.trace() / 2));
   result.edges = static_cast<int>(fits.size());
+  return result;
+}
+
+}  // namespace teachsim::vision
+
+// ---------------------------------------------------------------------------------------------
+// Model-based pose refinement: the pose fitted to stations along the model's edges.
+
+namespace teachsim::vision {
+
+Status EdgeFitOptions::Validate() const {
+  auto in = [](double v, double lo, double hi) { return std::isfinite(v) && v >= lo && v <= hi; };
+  if (!in(station_length_px, 3, 40) || !in(station_spacing_px, 1, 100) || !in(band_px, 1.5, 10) ||
+      !in(max_offset_px, 0.25, 10)) {
+    return Status::InvalidInput(
+        "EdgeFitOptions: station_length_px must be in [3, 40], station_spacing_px in [1, 100], band_px in "
+        "[1.5, 10] and max_offset_px in [0.25, 10] px, got " +
+        json::FormatNumber(station_length_px) + ", " + json::FormatNumber(station_spacing_px) + ", " +
+        json::FormatNumber(band_px) + ", " + json::FormatNumber(max_offset_px));
+  }
+  if (!in(min_step, 0, 1e3) || !in(clearance_px, 0, 50) || !in(relative_step, 0, 1)) {
+    return Status::InvalidInput("EdgeFitOptions: min_step must be >= 0, clearance_px in [0, 50] px and "
+                                "relative_step in [0, 1], got " +
+                                json::FormatNumber(min_step) + ", " + json::FormatNumber(clearance_px) + ", " +
+                                json::FormatNumber(relative_step));
+  }
+  if (!in(edge_bias_px, 0, 100) || !in(edge_bias_per_spread, 0, 100)) {
+    return Status::InvalidInput("EdgeFitOptions: edge_bias_px must be in [0, 100] px and edge_bias_per_spread "
+                                "in [0, 100], got " +
+                                json::FormatNumber(edge_bias_px) + ", " + json::FormatNumber(edge_bias_per_spread));
+  }
+  if (!in(grain_correlation_px, 0, 1000)) {
+    return Status::InvalidInput("EdgeFitOptions: grain_correlation_px must be in [0, 1000] px, got " +
+                                json::FormatNumber(grain_correlation_px));
+  }
+  if (min_stations < 1 || rounds < 1 || rounds > 10 || !in(tukey_c, 1, 100)) {
+    return Status::InvalidInput("EdgeFitOptions: min_stations must be >= 1, rounds in [1, 10] and tukey_c "
+                                "in [1, 100], got " +
+                                std::to_string(min_stations) + ", " + std::to_string(rounds) + ", " +
+                                json::FormatNumber(tukey_c));
+  }
+  return Status::Ok();
+}
+
+namespace {
+
+Eigen::Vector2d IdealToPixel(const Camera& camera, const Eigen::Vector2d& ideal) {
+  const Intrinsics& k = camera.intrinsics();
+  return camera.NormalizedToPixel({(ideal.x() - k.cx) / k.fx, (ideal.y() - k.cy) / k.fy});
+}
+
+std::string DirectionLabel(const Eigen::Vector3d& e) {
+  const double length = e.norm();
+  for (int axis = 0; axis < 3; ++axis) {
+    if (std::abs(std::abs(e(axis)) - length) < 1e-9 * (1 + length)) {
+      return std::string(e(axis) > 0 ? "+" : "-") + "xyz"[axis] + " " +
+             json::FormatNumber(std::round(length * 1e4) / 10) + " mm";
+    }
+  }
+  return "(" + json::FormatNumber(e.x()) + ", " + json::FormatNumber(e.y()) + ", " + json::FormatNumber(e.z()) +
+         ") m";
+}
+
+// Distance from p to the segment a-b (2-D).
+double SegmentDistance(const Eigen::Vector2d& p, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  const Eigen::Vector2d ab = b - a;
+  const double t = ab.squaredNorm() > 0 ? std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 0.0;
+  return (a + t * ab - p).norm();
+}
+
+geometry::Pose3 Moved(const geometry::Pose3& base, const Eigen::Matrix<double, 6, 1>& d) {
+  const Eigen::Vector3d w = d.tail<3>();
+  const double angle = w.norm();
+  const Eigen::Quaterniond turn(
+      Eigen::AngleAxisd(angle, angle > 0 ? Eigen::Vector3d(w / angle) : Eigen::Vector3d::UnitX()));
+  return geometry::Pose3((base.rotation * turn).normalized(), base.translation + d.head<3>());
+}
+
+}  // namespace
+
+EdgeStation FitEdgeStation(const cv::Mat& gray, const Camera& camera, const Eigen::Vector2d& ideal_point,
+                           const Eigen::Vector2d& ideal_direction, const EdgeFitOptions& options) {
+  TEACHSIM_CHECK(gray.type() == CV_8UC1);
+  EdgeStation station;
+  const Eigen::Vector2d t0 = ideal_direction.normalized();
+  station.normal = Eigen::Vector2d(-t0.y(), t0.x());
+  station.ideal = ideal_point;
+  const Eigen::Vector2d pixel = IdealToPixel(camera, ideal_point);
+  // Beyond the lens polynomial's fold an ideal point maps back into the image: check the round trip.
+  auto back = camera.UndistortPixel(pixel);
+  if (!pixel.allFinite() || !back || (*back - ideal_point).norm() > 0.01) {
+    station.reason = "beyond the lens model";
+    return station;
+  }
+  const double half = 0.5 * options.station_length_px, reach = options.max_offset_px;
+  const int radius =
+      static_cast<int>(std::ceil(std::hypot(half, options.band_px + reach) * 1.2 + 2));  // 1.2: the lens's scale
+  if (pixel.x() - radius < 0 || pixel.y() - radius < 0 || pixel.x() + radius > gray.cols - 1 ||
+      pixel.y() + radius > gray.rows - 1) {
+    station.reason = "too near the image's border";
+    return station;
+  }
+  auto patch = MakeIdealPatch(gray, camera, pixel, radius);
+  if (!patch) {
+    station.reason = "beyond the lens model";
+    return station;
+  }
+  PredictedEdge edge;
+  edge.direction = t0;
+  edge.r_min = -half;
+  edge.r_max = half;
+  const double start = CoarseOffset(*patch, ideal_point, edge, reach, options.band_px);
+  const StepFit fit = FitStep(*patch, ideal_point, edge, start, options.band_px, 30, /*free_turn=*/false,
+                                /*offset_tolerance_px=*/1e-3);
+  if (!fit.ok) {
+    station.reason = "no step could be fitted";
+    return station;
+  }
+  // The direction is held, so the fit's normal is the predicted one.
+  station.offset_px = fit.c - station.normal.dot(ideal_point);
+  station.ideal = ideal_point + station.normal * station.offset_px;
+  station.sigma_px = std::sqrt(fit.offset_var);
+  station.step = fit.b;
+  station.blur_px = fit.s;
+  if (std::abs(fit.b) < options.min_step) {
+    station.reason = "step " + json::FormatNumber(std::abs(fit.b)) + " gray levels, under " +
+                     json::FormatNumber(options.min_step);
+  } else if (fit.s < 0.5 || fit.s > 2.0) {
+    station.reason = "blur " + json::FormatNumber(fit.s) + " px outside 0.5-2 px";
+  } else if (std::abs(station.offset_px) > reach) {
+    station.reason = "step " + json::FormatNumber(station.offset_px) + " px from the prediction";
+  } else {
+    station.ok = true;
+  }
+  return station;
+}
+
+std::vector<ModelEdge> ModelEdgesOf(const std::vector<PointCorrespondence>& points) {
+  std::vector<ModelEdge> edges;
+  // b lies on segment e (within 1e-6 m of it).
+  auto on = [](const ModelEdge& e, const Eigen::Vector3d& p) {
+    const Eigen::Vector3d ab = e.to_in_world - e.from_in_world;
+    const double t = std::clamp((p - e.from_in_world).dot(ab) / ab.squaredNorm(), 0.0, 1.0);
+    return (e.from_in_world + t * ab - p).norm() < 1e-6;
+  };
+  for (const PointCorrespondence& p : points) {
+    for (const Eigen::Vector3d& e : p.edges_in_world) {
+      if (!(e.norm() > 1e-6)) continue;
+      ModelEdge edge{p.name + " along " + DirectionLabel(e), p.p_in_world, p.p_in_world + e};
+      bool duplicate = false;
+      for (ModelEdge& existing : edges) {
+        if (on(existing, edge.from_in_world) && on(existing, edge.to_in_world)) {
+          duplicate = true;  // the same segment, or a part of one already there
+          break;
+        }
+        if (on(edge, existing.from_in_world) && on(edge, existing.to_in_world)) {
+          existing = edge;  // a longer one
+          duplicate = true;
+          break;
+        }
+      }
+      if (!duplicate) edges.push_back(std::move(edge));
+    }
+  }
+  return edges;
+}
+
+Result<EdgePoseSolution> SolvePoseToEdges(const Camera& camera, const std::vector<ModelEdge>& edges,
+                                          const std::vector<EdgeObservation>& observations,
+                                          const std::vector<PointCorrespondence>& points,
+                                          const EdgeFitOptions& options, double click_sigma_px) {
+  TEACHSIM_RETURN_IF_ERROR(options.Validate());
+  if (!(click_sigma_px > 0)) return Status::InvalidInput("edge fit: click sigma must be > 0 px");
+  for (const EdgeObservation& o : observations) {
+    if (o.edge < 0 || o.edge >= static_cast<int>(edges.size()) || !(o.sigma_px > 0) || !o.ideal.allFinite()) {
+      return Status::InvalidInput("edge fit: an observation names edge " + std::to_string(o.edge) + " of " +
+                                  std::to_string(edges.size()) + " or has sigma " +
+                                  json::FormatNumber(o.sigma_px) + " px (expected > 0)");
+    }
+  }
+  const std::size_t n_obs = observations.size();
+  const std::size_t n_points = options.use_points ? points.size() : 0;
+  const Eigen::Index measured = static_cast<Eigen::Index>(n_obs + 2 * n_points);
+  if (measured < 6) {
+    return Status::InvalidInput("edge fit: " + std::to_string(measured) + " residuals, need >= 6");
+  }
+  // With edge_bias_px, each edge gets an offset of its own (px, along its normal) with that prior
+  // sigma: a stripe of grain beside an edge moves all its stations alike, so an edge's offset is
+  // worth no more than that however many stations it has, while its direction still counts in full.
+  std::vector<double> bias_sigma(edges.size());
+  bool biased = false;
+  for (std::size_t e = 0; e < edges.size(); ++e) {
+    bias_sigma[e] = edges[e].offset_sigma_px > 0 ? edges[e].offset_sigma_px : options.edge_bias_px;
+    biased = biased || bias_sigma[e] > 0;
+  }
+  // An edge without a prior sigma while others have one: its offset held at 0.
+  for (double& b : bias_sigma) b = b > 0 ? b : 1e-9;
+  const Eigen::Index n_bias = biased ? static_cast<Eigen::Index>(edges.size()) : 0;
+  const Eigen::Index rows = measured + n_bias, cols = 6 + n_bias;
+  const Eigen::Matrix3d k_inv_t = camera.K().inverse().transpose();
+  // Normalized residuals (over each sigma) at a pose and edge offsets; false when a point falls
+  // behind the camera.
+  auto residuals = [&](const geometry::Pose3& world_T_camera, const Eigen::VectorXd& bias, Eigen::VectorXd& r) {
+    r.resize(rows);
+    const geometry::Pose3 camera_T_world = world_T_camera.Inverse();
+    std::vector<Eigen::Vector3d> lines(edges.size());
+    for (std::size_t e = 0; e < edges.size(); ++e) {
+      // The plane through the camera centre and the edge, as a line in homogeneous pixels.
+      const Eigen::Vector3d a = camera_T_world * edges[e].from_in_world, b = camera_T_world * edges[e].to_in_world;
+      Eigen::Vector3d l = k_inv_t * a.cross(b);
+      const double norm = std::hypot(l.x(), l.y());
+      if (!(norm > 0)) return false;
+      lines[e] = l / norm;
+    }
+    for (std::size_t i = 0; i < n_obs; ++i) {
+      const EdgeObservation& o = observations[i];
+      const double offset = biased ? bias(o.edge) : 0.0;
+      r(static_cast<Eigen::Index>(i)) =
+          (lines[static_cast<std::size_t>(o.edge)].dot(Eigen::Vector3d(o.ideal.x(), o.ideal.y(), 1)) - offset) /
+          o.sigma_px;
+    }
+    if (n_points > 0) {
+      const Camera posed(camera.intrinsics(), camera.distortion(), world_T_camera, camera.width(), camera.height());
+      for (std::size_t i = 0; i < n_points; ++i) {
+        auto projected = posed.Project(points[i].p_in_world);
+        if (!projected) return false;
+        const double sigma = points[i].sigma_px > 0 ? points[i].sigma_px : click_sigma_px;
+        r.segment<2>(static_cast<Eigen::Index>(n_obs + 2 * i)) = (*projected - points[i].pixel) / sigma;
+      }
+    }
+    for (Eigen::Index e = 0; e < n_bias; ++e) r(measured + e) = bias(e) / bias_sigma[static_cast<std::size_t>(e)];
+    return r.allFinite();
+  };
+  auto jacobian = [&](const geometry::Pose3& pose, const Eigen::VectorXd& bias, Eigen::MatrixXd& j) {
+    j.setZero(rows, cols);
+    Eigen::VectorXd plus, minus;
+    for (int c = 0; c < 6; ++c) {
+      const double h = 1e-6;
+      Eigen::Matrix<double, 6, 1> d = Eigen::Matrix<double, 6, 1>::Zero();
+      d(c) = h;
+      if (!residuals(Moved(pose, d), bias, plus) || !residuals(Moved(pose, -d), bias, minus)) return false;
+      j.col(c) = (plus - minus) / (2 * h);
+    }
+    for (std::size_t i = 0; biased && i < n_obs; ++i) {
+      j(static_cast<Eigen::Index>(i), 6 + observations[i].edge) = -1 / observations[i].sigma_px;
+    }
+    for (Eigen::Index e = 0; e < n_bias; ++e) j(measured + e, 6 + e) = 1 / bias_sigma[static_cast<std::size_t>(e)];
+    return true;
+  };
+  auto tukey = [&](double u, double scale) {
+    const double x = u / (options.tukey_c * scale);
+    return std::abs(x) >= 1 ? 0.0 : (1 - x * x) * (1 - x * x);
+  };
+  auto robust_scale = [&](const Eigen::VectorXd& r) {
+    std::vector<double> a;
+    for (std::size_t i = 0; i < n_obs; ++i) a.push_back(std::abs(r(static_cast<Eigen::Index>(i))));
+    if (a.empty()) {
+      for (Eigen::Index i = 0; i < measured; ++i) a.push_back(std::abs(r(i)));
+    }
+    std::nth_element(a.begin(), a.begin() + static_cast<std::ptrdiff_t>(a.size() / 2), a.end());
+    return std::max(0.05, 1.4826 * a[a.size() / 2]);
+  };
+
+  geometry::Pose3 pose = camera.world_T_camera();
+  Eigen::VectorXd bias = Eigen::VectorXd::Zero(n_bias);
+  Eigen::VectorXd r;
+  if (!residuals(pose, bias, r)) return Status::Failed("edge fit: the model lies behind the starting camera");
+  Eigen::VectorXd w(rows);
+  double scale = robust_scale(r);
+  Eigen::MatrixXd j;
+  for (int outer = 0; outer < 20; ++outer) {
+    // Tukey's weights from the current residuals (a point's two coordinates share one weight; the
+    // offsets' priors are not robust).
+    scale = robust_scale(r);
+    for (Eigen::Index i = 0; i < rows; ++i) w(i) = i < measured ? tukey(r(i), scale) : 1.0;
+    for (std::size_t i = 0; i < n_points; ++i) {
+      const Eigen::Index at = static_cast<Eigen::Index>(n_obs + 2 * i);
+      w(at) = w(at + 1) = tukey(r.segment<2>(at).norm(), scale);
+    }
+    auto cost_of = [&](const Eigen::VectorXd& x) { return (w.array() * x.array().square()).sum(); };
+    double cost = cost_of(r);
+    double lambda = 1e-4;
+    double moved_total = 0;
+    for (int iteration = 0; iteration < 30; ++iteration) {
+      if (!jacobian(pose, bias, j)) return Status::Failed("edge fit: the model falls behind the camera");
+      const Eigen::MatrixXd a = j.transpose() * w.asDiagonal() * j;
+      const Eigen::VectorXd g = j.transpose() * (w.array() * r.array()).matrix();
+      bool improved = false, converged = false;
+      for (int attempt = 0; attempt < 10 && !improved; ++attempt) {
+        Eigen::MatrixXd damped = a;
+        damped.diagonal() += lambda * a.diagonal().cwiseMax(1e-12);
+        const Eigen::VectorXd delta = -damped.ldlt().solve(g);
+        if (!delta.allFinite()) break;
+        const geometry::Pose3 next = Moved(pose, delta.head<6>());
+        const Eigen::VectorXd next_bias = bias + delta.tail(n_bias);
+        Eigen::VectorXd next_r;
+        if (!residuals(next, next_bias, next_r)) {
+          lambda *= 10;
+          continue;
+        }
+        const double next_cost = cost_of(next_r);
+        if (next_cost <= cost) {
+          improved = true;
+          // Converged: the cost falls by a negligible share, or the step is far below a micrometre.
+          converged = cost - next_cost <= 1e-10 * cost || delta.norm() < 1e-10;
+          pose = next;
+          bias = next_bias;
+          r = next_r;
+          cost = next_cost;
+          moved_total += delta.norm();
+          lambda = std::max(1e-9, lambda / 10);
+        } else {
+          lambda *= 10;
+        }
+      }
+      if (!improved || converged) break;
+    }
+    if (outer > 0 && moved_total < 1e-9) break;
+  }
+  if (!jacobian(pose, bias, j)) return Status::Failed("edge fit: the model falls behind the camera");
+  const Eigen::MatrixXd information = j.transpose() * w.asDiagonal() * j;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(information);
+  if (!(eigen.eigenvalues()(0) > 1e-12 * eigen.eigenvalues()(cols - 1))) {
+    return Status::Failed("edge fit: the edges and points found do not determine the camera's pose");
+  }
+  EdgePoseSolution solution;
+  solution.world_T_camera = pose;
+  solution.scale = scale;
+  const Eigen::MatrixXd covariance =
+      scale * scale * information.ldlt().solve(Eigen::MatrixXd::Identity(cols, cols));
+  solution.position_covariance_m2 = covariance.topLeftCorner<3, 3>();
+  solution.edge_offsets_px.assign(edges.size(), 0.0);
+  for (Eigen::Index e = 0; e < n_bias; ++e) solution.edge_offsets_px[static_cast<std::size_t>(e)] = bias(e);
+  for (std::size_t i = 0; i < n_obs; ++i) {
+    // The distance to the projected edge itself (its offset not taken off).
+    const double offset = biased ? bias(observations[i].edge) : 0.0;
+    solution.residuals_px.push_back(r(static_cast<Eigen::Index>(i)) * observations[i].sigma_px + offset);
+    solution.weights.push_back(w(static_cast<Eigen::Index>(i)));
+  }
+  const Camera posed(camera.intrinsics(), camera.distortion(), pose, camera.width(), camera.height());
+  for (const PointCorrespondence& p : points) {
+    auto projected = posed.Project(p.p_in_world);
+    solution.point_residuals_px.push_back(projected ? (*projected - p.pixel).norm() : NAN);
+  }
+  return solution;
+}
+
+Result<EdgePoseResult> FitPoseToEdges(const cv::Mat& gray, const Camera& camera,
+                                      const std::vector<PointCorrespondence>& points,
+                                      const EdgeFitOptions& options, double click_sigma_px,
+                                      const std::function<void(const std::string&)>& progress) {
+  TEACHSIM_CHECK(gray.type() == CV_8UC1);
+  TEACHSIM_RETURN_IF_ERROR(options.Validate());
+  const std::vector<ModelEdge> edges = ModelEdgesOf(points);
+  if (edges.empty()) {
+    return Status::InvalidInput("edge fit: no point has edges (\"edges\" in the points file)");
+  }
+  Camera current = camera;
+  EdgePoseResult result;
+  EdgePoseSolution solution;
+  std::vector<EdgeObservation> observations;
+  const double half = 0.5 * options.station_length_px;
+  // Stations clear of other edges: the station's pixels (a rectangle half x band about its centre)
+  // and the blur.
+  const double clear_of_others = std::hypot(half, options.band_px) + options.clearance_px + 1;
+  for (int round = 0; round < options.rounds; ++round) {
+    EdgeFitOptions o = options;
+    if (round > 0) o.max_offset_px = std::max(0.5, options.max_offset_px / 2);
+    const geometry::Pose3 camera_T_world = current.world_T_camera().Inverse();
+    std::vector<std::optional<std::pair<Eigen::Vector2d, Eigen::Vector2d>>> projected(edges.size());
+    for (std::size_t e = 0; e < edges.size(); ++e) {
+      auto a = IdealProjection(current, edges[e].from_in_world), b = IdealProjection(current, edges[e].to_in_world);
+      const double za = (camera_T_world * edges[e].from_in_world).z(), zb = (camera_T_world * edges[e].to_in_world).z();
+      if (a && b && za > 0.05 && zb > 0.05 && (*b - *a).norm() > 1) projected[e] = std::make_pair(*a, *b);
+    }
+    observations.clear();
+    result.edges.assign(edges.size(), EdgeReport{});
+    for (std::size_t e = 0; e < edges.size(); ++e) {
+      EdgeReport& report = result.edges[e];
+      report.name = edges[e].name;
+      if (!projected[e]) continue;
+      const auto [a, b] = *projected[e];
+      const double length = (b - a).norm();
+      const Eigen::Vector2d t = (b - a) / length;
+      const double margin = half + o.band_px + o.clearance_px;
+      if (length - 2 * margin < 0) continue;
+      const int count = static_cast<int>(std::floor((length - 2 * margin) / o.station_spacing_px)) + 1;
+      const double first = 0.5 * (length - (count - 1) * o.station_spacing_px);
+      std::vector<EdgeStation> stations;
+      for (int s = 0; s < count; ++s) {
+        const Eigen::Vector2d centre = a + t * (first + s * o.station_spacing_px);
+        bool clear = true;
+        for (std::size_t other = 0; other < edges.size() && clear; ++other) {
+          if (other == e || !projected[other]) continue;
+          clear = SegmentDistance(centre, projected[other]->first, projected[other]->second) > clear_of_others;
+        }
+        if (!clear) continue;
+        EdgeStation station = FitEdgeStation(gray, current, centre, t, o);
+        if (station.reason == "too near the image's border" || station.reason == "beyond the lens model") continue;
+        ++report.stations;
+        if (station.ok) stations.push_back(station);
+      }
+      if (stations.empty()) continue;
+      // The edge's polarity and typical step: a station of the other polarity or a much weaker step
+      // sees something else there (an occluder, a shadow's edge, a stripe of grain).
+      std::vector<double> steps;
+      for (const EdgeStation& s : stations) steps.push_back(s.step);
+      std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
+      const double median = steps[steps.size() / 2];
+      std::vector<EdgeObservation> kept;
+      for (const EdgeStation& s : stations) {
+        if (s.step * median <= 0 || std::abs(s.step) < o.relative_step * std::abs(median)) continue;
+        kept.push_back({static_cast<int>(e), s.ideal, std::hypot(s.sigma_px, 0.02)});
+      }
+      if (static_cast<int>(kept.size()) < o.min_stations) continue;
+      report.fitted = static_cast<int>(kept.size());
+      observations.insert(observations.end(), kept.begin(), kept.end());
+    }
+    auto solved = SolvePoseToEdges(current, edges, observations, points, options, click_sigma_px);
+    if (!solved.ok()) return solved.status();
+    if (options.grain_correlation_px > 0) {
+      // The stripes of grain beside an edge move its stations alike over a stretch of it: each edge's
+      // own spread of residuals (robust) counts as an error shared by the stations within
+      // grain_correlation_px, so a grainy edge weighs less than a clean one of the same length.
+      std::vector<std::vector<double>> spread(edges.size());
+      for (std::size_t i = 0; i < observations.size(); ++i) {
+        spread[static_cast<std::size_t>(observations[i].edge)].push_back(std::abs(solved->residuals_px[i]));
+      }
+      std::vector<double> edge_sigma(edges.size(), 0.0);
+      for (std::size_t e = 0; e < edges.size(); ++e) {
+        std::vector<double>& a = spread[e];
+        if (a.empty()) continue;
+        std::nth_element(a.begin(), a.begin() + static_cast<std::ptrdiff_t>(a.size() / 2), a.end());
+        edge_sigma[e] = 1.4826 * a[a.size() / 2];
+      }
+      const double shared = std::max(1.0, options.grain_correlation_px / o.station_spacing_px);
+      for (EdgeObservation& ob : observations) {
+        const double g = edge_sigma[static_cast<std::size_t>(ob.edge)];
+        ob.sigma_px = std::sqrt(ob.sigma_px * ob.sigma_px + g * g * shared);
+      }
+      std::vector<ModelEdge> with_offsets = edges;
+      if (options.edge_bias_per_spread > 0) {
+        // A grainy edge (its stations scattered about it) is likely shifted as a whole by the
+        // grain as well: its offset gets a prior of that scale; a clean one (the table's) keeps
+        // its offset nearly fixed.
+        for (std::size_t e = 0; e < edges.size(); ++e) {
+          with_offsets[e].offset_sigma_px = std::max(0.02, options.edge_bias_per_spread * edge_sigma[e]);
+        }
+      }
+      solved = SolvePoseToEdges(current, with_offsets, observations, points, options, click_sigma_px);
+      if (!solved.ok()) return solved.status();
+    }
+    solution = std::move(*solved);
+    current = Camera(camera.intrinsics(), camera.distortion(), solution.world_T_camera, camera.width(),
+                     camera.height());
+    if (progress) {
+      int used = 0, edges_used = 0;
+      double sum2 = 0;
+      for (std::size_t i = 0; i < observations.size(); ++i) {
+        if (solution.weights[i] > 0.5) {
+          ++used;
+          sum2 += solution.residuals_px[i] * solution.residuals_px[i];
+        }
+      }
+      for (const EdgeReport& report : result.edges) edges_used += report.fitted > 0 ? 1 : 0;
+      const Eigen::Vector3d& p = solution.world_T_camera.translation;
+      char line[256];
+      std::snprintf(line, sizeof line,
+                    "round %d: %d stations on %d edges (%d kept), RMS %.3f px; camera at (%.1f, %.1f, %.1f) mm",
+                    round + 1, static_cast<int>(observations.size()), edges_used, used,
+                    used > 0 ? std::sqrt(sum2 / used) : 0.0, p.x() * 1e3, p.y() * 1e3, p.z() * 1e3);
+      progress(line);
+    }
+  }
+  double sum2 = 0;
+  std::vector<double> edge_sum2(edges.size(), 0.0);
+  for (std::size_t i = 0; i < observations.size(); ++i) {
+    if (!(solution.weights[i] > 0.5)) continue;
+    const std::size_t e = static_cast<std::size_t>(observations[i].edge);
+    ++result.edges[e].used;
+    edge_sum2[e] += solution.residuals_px[i] * solution.residuals_px[i];
+    sum2 += solution.residuals_px[i] * solution.residuals_px[i];
+    ++result.stations_used;
+  }
+  for (std::size_t e = 0; e < edges.size(); ++e) {
+    if (result.edges[e].used > 0) result.edges[e].rms_px = std::sqrt(edge_sum2[e] / result.edges[e].used);
+    if (e < solution.edge_offsets_px.size()) result.edges[e].offset_px = solution.edge_offsets_px[e];
+  }
+  result.station_rms_px = result.stations_used > 0 ? std::sqrt(sum2 / result.stations_used) : 0;
+  ExtrinsicsResult& x = result.extrinsics;
+  x.world_T_camera = solution.world_T_camera;
+  x.residuals_px = solution.point_residuals_px;
+  x.dropped.assign(points.size(), false);
+  double point_sum2 = 0;
+  for (const double r : x.residuals_px) point_sum2 += r * r;
+  x.rms_px = points.empty() ? 0 : std::sqrt(point_sum2 / static_cast<double>(points.size()));
+  x.position_covariance_m2 = solution.position_covariance_m2;
+  x.position_sigma_m = std::sqrt(std::max(0.0, solution.position_covariance_m2.trace()));
   return result;
 }
 

@@ -2,15 +2,19 @@
 // within 2 mm from 6 known points with 0.5 px noise on the clicks). The clicks are the true
 // projections of the frame's and the table's corners plus noise; vision::SnapCorrespondences moves
 // them to the corner in the image (guided by a first pose from the clicks and the corners' 3-D
-// edges), and vision::CalibrateExtrinsics solves the pose weighted by each point's sigma. The test lives
-// here, not in vision, because the images come from the worksite renderer (worksite depends on vision).
+// edges), vision::CalibrateExtrinsics solves the pose weighted by each point's sigma, and
+// vision::FitPoseToEdges fits that pose to the points' model edges along their whole visible length
+// (`--snap --edge-fit`). The test lives here, not in vision, because the images come from the
+// worksite renderer (worksite depends on vision).
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <map>
+#include <optional>
 #include <random>
 
 #include "fixtures.h"
@@ -106,6 +110,7 @@ struct Summary {
   std::map<std::string, std::vector<double>> snap_error_by_feature_px;
   std::vector<double> sigma_ratio;        // per snapped point, |snapped - truth| / (sqrt 2 sigma)
   std::vector<double> position_error_mm;  // per trial
+  std::vector<double> stations, station_rms_px;  // per trial, with the edge fit
   int points = 0, unsnapped = 0;
 };
 
@@ -131,6 +136,11 @@ void Print(const char* label, const Summary& s) {
     std::printf("    %-20s snapped %3zu  error px median %.3f p95 %.3f max %.3f\n", name.c_str(),
                 errors.size(), Quantile(errors, 0.5), Quantile(errors, 0.95), Quantile(errors, 1.0));
   }
+  if (!s.stations.empty()) {
+    std::printf("    edge stations used per trial median %.0f min %.0f, their RMS px median %.3f p95 %.3f\n",
+                Quantile(s.stations, 0.5), Quantile(s.stations, 0.0), Quantile(s.station_rms_px, 0.5),
+                Quantile(s.station_rms_px, 0.95));
+  }
   if (!s.sigma_ratio.empty()) {
     std::printf("    error / (sqrt 2 sigma) median %.2f p95 %.2f\n", Quantile(s.sigma_ratio, 0.5),
                 Quantile(s.sigma_ratio, 0.95));
@@ -142,7 +152,8 @@ enum class Snap { kNone, kEdgeLines, kCornerSubPix };
 
 // One image's trials: each trial clicks every usable feature (truth + noise), snaps, solves.
 void RunTrials(const cv::Mat& image, const vision::Camera& truth, const std::vector<Feature>& features,
-               Clicks clicks, Snap snap, int trials, std::mt19937& rng, Summary& summary) {
+               Clicks clicks, Snap snap, int trials, std::mt19937& rng, Summary& summary,
+               Summary* edge_fit = nullptr) {
   std::normal_distribution<double> gaussian(0, 0.5);
   // The operator's click accuracy, as `--click-sigma` tells it: points the snapping keeps as clicked
   // are weighted by it. Whole-pixel clicks up to 2 px off: uniform over 4 px, sigma 4 / sqrt 12.
@@ -190,26 +201,47 @@ void RunTrials(const cv::Mat& image, const vision::Camera& truth, const std::vec
     ASSERT_TRUE(result.ok()) << result.status().message();
     summary.position_error_mm.push_back(
         (result->world_T_camera.translation - truth.world_T_camera().translation).norm() * 1e3);
+    if (edge_fit != nullptr) {
+      // From that pose, fitted to the model's edges along their whole visible length (--edge-fit).
+      const vision::Camera posed(truth.intrinsics(), truth.distortion(), result->world_T_camera, truth.width(),
+                                 truth.height());
+      auto fitted = vision::FitPoseToEdges(image, posed, points, vision::EdgeFitOptions{}, click_sigma_px);
+      ASSERT_TRUE(fitted.ok()) << fitted.status().message();
+      edge_fit->points += static_cast<int>(points.size());
+      edge_fit->stations.push_back(fitted->stations_used);
+      edge_fit->station_rms_px.push_back(fitted->station_rms_px);
+      edge_fit->position_error_mm.push_back(
+          (fitted->extrinsics.world_T_camera.translation - truth.world_T_camera().translation).norm() * 1e3);
+    }
   }
 }
 
 struct Measurement {
   int images = 0;
   Summary gauss_none, gauss_lines, gauss_subpix, whole_none, whole_lines, whole_subpix;
+  bool edge_fit = false;
+  Summary gauss_edges, whole_edges;  // snapped, then the pose fitted to the model's edges (edge_fit)
 };
 
 // Cameras: the scene's camera and perturbed copies (up to 4 cm and 4 degrees), two renders each
 // (sensor noise and the wood's grain differ), 20 trials per render and click model: Gaussian
-// clicks of sigma 0.5 px, and whole-pixel clicks up to 2 px off (before rounding).
-Measurement Measure() {
+// clicks of sigma 0.5 px, and whole-pixel clicks up to 2 px off (before rounding). With edge_fit,
+// the snapped trials go on to the edge fit too (~6 s more).
+Measurement Measure(bool edge_fit) {
   Measurement m;
+  m.edge_fit = edge_fit;
   const scene::Scene scene = testing::Puzzle();
   auto main_camera =
       vision::Camera::FromSpec(scene.cameras.at(static_cast<std::size_t>(scene.FindCamera("main"))));
   TEACHSIM_CHECK(main_camera.ok());
   const std::vector<Feature> all_features = RecommendedFeatures(scene);
   const std::vector<RenderObject> base_objects = ObjectsFromScene(scene);
-  std::mt19937 rng(2026);
+  // TEACHSIM_CALIBRATION_SNAP_SEED picks other cameras, grain and noise (a held-out check of
+  // figures measured on the default set; the tests' bars are stated for the default).
+  std::uint32_t set = 2026;
+  if (const char* env = std::getenv("TEACHSIM_CALIBRATION_SNAP_SEED")) set = static_cast<std::uint32_t>(std::stoul(env));
+  const std::uint32_t other = set - 2026;
+  std::mt19937 rng(set);
   const int cameras = 6, renders_per_camera = 2, trials = 20;
   for (int c = 0; c < cameras; ++c) {
     const vision::Camera camera = c == 0 ? *main_camera : Perturbed(*main_camera, rng, 0.04, 0.07);
@@ -217,8 +249,8 @@ Measurement Measure() {
     TEACHSIM_CHECK(renderer.ok());
     for (int r = 0; r < renders_per_camera; ++r) {
       std::vector<RenderObject> objects = base_objects;
-      for (RenderObject& o : objects) o.texture_seed += 7919u * static_cast<std::uint32_t>(r);
-      const RenderResult render = renderer->Render(objects, 100 + static_cast<std::uint64_t>(10 * c + r));
+      for (RenderObject& o : objects) o.texture_seed += 7919u * (static_cast<std::uint32_t>(r) + 2 * other);
+      const RenderResult render = renderer->Render(objects, 100 + 100 * other + static_cast<std::uint64_t>(10 * c + r));
       std::vector<Feature> features;
       for (const Feature& f : all_features) {
         if (Usable(render, objects, camera, f, 12)) features.push_back(f);
@@ -230,39 +262,71 @@ Measurement Measure() {
       RunTrials(render.image, camera, features, Clicks::kGaussianHalfPixel, Snap::kNone, trials, a,
                 m.gauss_none);
       RunTrials(render.image, camera, features, Clicks::kGaussianHalfPixel, Snap::kEdgeLines, trials, b,
-                m.gauss_lines);
+                m.gauss_lines, edge_fit ? &m.gauss_edges : nullptr);
       RunTrials(render.image, camera, features, Clicks::kGaussianHalfPixel, Snap::kCornerSubPix, trials, d,
                 m.gauss_subpix);
+      if (edge_fit) {  // per image: the edge fit's errors of this image's trials
+        const std::vector<double> errors(m.gauss_edges.position_error_mm.end() - trials,
+                                         m.gauss_edges.position_error_mm.end());
+        std::printf("camera %d render %d: snap + edge fit, sigma 0.5 px: error mm median %.2f max %.2f\n", c, r,
+                    Quantile(errors, 0.5), Quantile(errors, 1.0));
+      }
       std::mt19937 e(seed + 1), f(seed + 1), g(seed + 1);
       RunTrials(render.image, camera, features, Clicks::kWholePixelTwoOff, Snap::kNone, trials, e,
                 m.whole_none);
       RunTrials(render.image, camera, features, Clicks::kWholePixelTwoOff, Snap::kEdgeLines, trials, f,
-                m.whole_lines);
+                m.whole_lines, edge_fit ? &m.whole_edges : nullptr);
       RunTrials(render.image, camera, features, Clicks::kWholePixelTwoOff, Snap::kCornerSubPix, trials, g,
                 m.whole_subpix);
     }
   }
-  std::printf("%d images of %d cameras\n", m.images, cameras);
+  std::printf("%d images of %d cameras (set %u)\n", m.images, cameras, set);
   Print("sigma 0.5 px, no snap", m.gauss_none);
   Print("sigma 0.5 px, snap edge lines", m.gauss_lines);
+  if (edge_fit) Print("sigma 0.5 px, snap + edge fit", m.gauss_edges);
   Print("sigma 0.5 px, snap cornerSubPix", m.gauss_subpix);
   Print("whole px +-2, no snap", m.whole_none);
   Print("whole px +-2, snap edge lines", m.whole_lines);
+  if (edge_fit) Print("whole px +-2, snap + edge fit", m.whole_edges);
   Print("whole px +-2, snap cornerSubPix", m.whole_subpix);
   return m;
 }
 
-// Measured once per process: the tests below share it (the renders and 720 trials take ~12 s).
-const Measurement& Measured() {
-  static const Measurement m = Measure();
-  return m;
+// Measured once per process and shared by the tests below (ctest runs each test in a process of its
+// own: the snapping tests skip the edge fit, ~11 s; with it ~17 s in Release). The edge fit's test
+// comes first so that one run of the whole binary measures once.
+const Measurement& Measured(bool edge_fit) {
+  static std::optional<Measurement> m;
+  if (!m || (edge_fit && !m->edge_fit)) m = Measure(edge_fit);
+  return *m;
+}
+
+// Issue 6's bar: the camera position within 2 mm in >= 95 % of the trials with 6 points clicked at
+// 0.5 px, met by `--snap --edge-fit`: the snapped points' pose fitted to the points' model edges along
+// their whole visible length (~173 stations per trial over ~10 edges, Tukey weights, each edge's
+// offset free within 1.5 x its stations' spread, two rounds of predict -> measure -> fit). Measured:
+// 100 % (max 1.5 mm) for sigma 0.5 px clicks and 100 % (max 1.9 mm) for whole-pixel clicks up to 2 px
+// off; snapping alone reaches 88 % and 82 %. Six other sets (TEACHSIM_CALIBRATION_SNAP_SEED 2027-2032):
+// 92-100 % per set, 98 % over all (docs/formats/calibration.md).
+TEST(CalibrationSnapTest, SnappedClicksAndEdgeFitPutTheCameraWithinTwoMillimetres) {
+  const Measurement& m = Measured(/*edge_fit=*/true);
+  ASSERT_GE(m.images, 5);
+  ASSERT_EQ(m.gauss_edges.position_error_mm.size(), m.gauss_lines.position_error_mm.size());
+  EXPECT_GE(ShareBelow(m.gauss_edges.position_error_mm, 2.0), 0.95);
+  EXPECT_GE(ShareBelow(m.whole_edges.position_error_mm, 2.0), 0.95);
+  // Better than the snapped points alone, in the bulk and in the tail.
+  EXPECT_LT(Quantile(m.gauss_edges.position_error_mm, 0.5), Quantile(m.gauss_lines.position_error_mm, 0.5));
+  EXPECT_LT(Quantile(m.gauss_edges.position_error_mm, 0.95), 0.7 * Quantile(m.gauss_lines.position_error_mm, 0.95));
+  // The walls' and the table's edges carry it: many stations, fitted to a fraction of a pixel.
+  EXPECT_GT(Quantile(m.gauss_edges.stations, 0.0), 60);
+  EXPECT_LT(Quantile(m.gauss_edges.station_rms_px, 0.95), 0.6);
 }
 
 // What snapping does today: clicks that are whole pixels and up to ~2 px off come out far better
 // snapped than as clicked (median camera position error 1.4 vs 4.3 mm), most snapped corners land
 // within half a pixel of the truth, and a point that cannot be snapped is reported, not moved.
 TEST(CalibrationSnapTest, SnappingImprovesCoarseClicks) {
-  const Measurement& m = Measured();
+  const Measurement& m = Measured(/*edge_fit=*/false);
   ASSERT_GE(m.images, 5);
   EXPECT_LT(Quantile(m.whole_lines.position_error_mm, 0.5),
             0.5 * Quantile(m.whole_none.position_error_mm, 0.5));
@@ -275,26 +339,13 @@ TEST(CalibrationSnapTest, SnappingImprovesCoarseClicks) {
 // corner's edges, blurred steps fitted along them, the pose weighted by each snap's sigma) puts the
 // camera within 2 mm far more often than the clicks alone (88 % vs 47.5 % of the trials).
 TEST(CalibrationSnapTest, SnappingImprovesHalfPixelClicks) {
-  const Measurement& m = Measured();
+  const Measurement& m = Measured(/*edge_fit=*/false);
   ASSERT_GE(m.images, 5);
   EXPECT_GT(ShareBelow(m.gauss_lines.position_error_mm, 2.0),
             ShareBelow(m.gauss_none.position_error_mm, 2.0) + 0.2);
   EXPECT_LT(Quantile(m.gauss_lines.position_error_mm, 0.95),
             0.8 * Quantile(m.gauss_none.position_error_mm, 0.95));
   EXPECT_LT(Quantile(m.gauss_lines.snap_error_px, 0.95), 1.2);
-}
-
-// Issue 6's bar: the camera position within 2 mm in >= 95 % of the trials with 6 points clicked at
-// 0.5 px. NOT MET YET (docs/formats/calibration.md): 88 % (sigma 0.5 px clicks) and 82 %
-// (whole-pixel clicks). The wood grain runs along the frame's top edges, and a stripe beside an edge
-// moves the fitted step by 0.2-0.9 px at some corners (untextured renders pass: 100 %).
-// Run with --gtest_also_run_disabled_tests to see the figures.
-TEST(CalibrationSnapTest, DISABLED_SnappedClicksPutTheCameraWithinTwoMillimetres) {
-  const Measurement& m = Measured();
-  ASSERT_GE(m.images, 5);
-  EXPECT_GE(ShareBelow(m.gauss_lines.position_error_mm, 2.0), 0.95);
-  EXPECT_GE(ShareBelow(m.whole_lines.position_error_mm, 2.0), 0.95);
-  EXPECT_LT(Quantile(m.gauss_lines.snap_error_px, 0.95), 0.3);
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -204,6 +205,134 @@ SnapResult SnapToModelCorner(const cv::Mat& gray, const Camera& camera, const Po
 std::vector<SnapResult> SnapCorrespondences(const cv::Mat& gray, const Camera& camera,
                                             std::vector<PointCorrespondence>& points,
                                             const SnapOptions& options, double click_sigma_px = 0.5);
+
+// ---------------------------------------------------------------------------------------------
+// Model-based pose refinement (Lowe-style): the pose fitted to the image's edges directly. Every
+// straight 3-D edge of the points (PointCorrespondence::edges_in_world, direction x length) is a
+// model edge; along its projection a blurred step is fitted at many short stations, each giving a
+// sub-pixel point on the edge, and the pose is the one whose projected edges pass closest to those
+// points (robust weights), together with the (snapped) points themselves. The wood's growth rings
+// run along the walls, so a ring beside an edge shifts all its stations alike: each edge may shift
+// as a whole (an offset of its own, its prior scaled by its stations' spread) and then still fixes
+// the pose by its direction (docs/formats/calibration.md, `--edge-fit`).
+
+struct EdgeFitOptions {
+  double station_length_px = 8;   // the pixels of one station: this long along the edge,
+  double station_spacing_px = 8;  // one station every this many px along it,
+  double band_px = 4;             // +-this across it
+  // The step is looked for within +-this of the predicted line (the pose from the points is
+  // good to about a pixel); the refit after the first pose fit looks within half of it.
+  double max_offset_px = 2;
+  double min_step = 8;  // gray levels: a weaker step is no edge
+  // A station is kept this far (px, beyond its own half length and the band) from the edge's
+  // ends and from the other model edges: junctions round off, and another edge's step is not this one.
+  double clearance_px = 2.5;
+  // Of an edge's stations, one whose step is under this share of the edge's median step, or of
+  // the other polarity, sees something else (an occluder, a shadow).
+  double relative_step = 0.5;
+  int min_stations = 3;  // an edge with fewer stations is not used
+  // The grain's stripes run along the frame's edges and move neighbouring stations alike: each
+  // station's sigma gets its edge's (robust) residual spread, counted once per this many px of
+  // edge. 0: the fits' own sigmas only.
+  double grain_correlation_px = 24;
+  // Each edge's offset is a free parameter with this prior sigma (px): a stripe of grain beside an
+  // edge moves all its stations alike. 0: no such offsets.
+  double edge_bias_px = 0;
+  // With grain_correlation_px: after each round's first solve, each edge's offset prior is this
+  // many times its stations' robust spread about it (>= 0.02 px). 0: edge_bias_px for all.
+  double edge_bias_per_spread = 1.5;
+  int rounds = 2;        // predict -> measure -> fit, this many times
+  double tukey_c = 4;    // robust weights: Tukey's biweight at this many robust standard deviations
+  // Weight of the points (their pixel and sigma_px, or the click sigma) beside the edges' stations.
+  bool use_points = true;
+  [[nodiscard]] Status Validate() const;
+};
+
+// One station's fit: a point on the edge (ideal = undistorted pixels) and what the fit says of it.
+struct EdgeStation {
+  bool ok = false;
+  Eigen::Vector2d ideal{0, 0};   // the fitted edge's point nearest the station's centre
+  Eigen::Vector2d normal{1, 0};  // the predicted (held) normal
+  double offset_px = 0;          // from the predicted line along `normal`
+  double sigma_px = 0;           // the offset's standard error (grain correlation included)
+  double step = 0;               // brightness change across the edge along `normal`, gray levels
+  double blur_px = 0;
+  std::string reason;            // when !ok
+};
+
+// Fits a blurred step (erf profile, two faces whose brightness may vary linearly, the blur's width)
+// to the pixels of `gray` within +-options.band_px of the line through `ideal_point` along unit
+// `ideal_direction` (both in the ideal image of `camera`'s intrinsics and distortion), for
+// station_length_px along it, the direction held. Not ok: too weak a step, the step beyond
+// max_offset_px, an implausible blur, or too near the image's border.
+EdgeStation FitEdgeStation(const cv::Mat& gray, const Camera& camera, const Eigen::Vector2d& ideal_point,
+                           const Eigen::Vector2d& ideal_direction, const EdgeFitOptions& options);
+
+// A straight model edge, world frame (m).
+struct ModelEdge {
+  std::string name;
+  Eigen::Vector3d from_in_world{0, 0, 0}, to_in_world{0, 0, 0};
+  // The prior sigma of the edge's offset in the image (px; EdgeFitOptions::edge_bias_px); 0: the
+  // options' value.
+  double offset_sigma_px = 0;
+};
+
+// The model edges of the points: each point's edges_in_world from its position, duplicates (the same
+// segment from its other end, or a part of a longer one) merged.
+std::vector<ModelEdge> ModelEdgesOf(const std::vector<PointCorrespondence>& points);
+
+// A measured point on model edge `edge` (ideal pixels) with its standard error.
+struct EdgeObservation {
+  int edge = 0;
+  Eigen::Vector2d ideal{0, 0};
+  double sigma_px = 0.1;
+};
+
+struct EdgePoseSolution {
+  geometry::Pose3 world_T_camera;
+  std::vector<double> residuals_px;  // per observation: signed distance to its projected edge, ideal px
+  std::vector<double> weights;       // per observation: the final robust weight (0: rejected), 0..1
+  std::vector<double> point_residuals_px;  // per point (distorted px)
+  Eigen::Matrix3d position_covariance_m2 = Eigen::Matrix3d::Zero();  // from the weighted Jacobian
+  double scale = 1;  // the robust standard deviation of the normalized residuals
+  std::vector<double> edge_offsets_px;  // per edge: its fitted offset (edge_bias_px > 0), else 0
+};
+
+// The pose minimizing the robust (Tukey, tukey_c x a robust scale) sum of squared normalized
+// distances of the observations from their projected model edges plus, with use_points, the points'
+// reprojection errors over their sigmas (0: click_sigma_px), by Gauss-Newton with damping from
+// `camera`'s pose. Fails when the pose is not determined.
+[[nodiscard]] Result<EdgePoseSolution> SolvePoseToEdges(const Camera& camera, const std::vector<ModelEdge>& edges,
+                                                        const std::vector<EdgeObservation>& observations,
+                                                        const std::vector<PointCorrespondence>& points,
+                                                        const EdgeFitOptions& options, double click_sigma_px);
+
+// Per model edge, what the fit used.
+struct EdgeReport {
+  std::string name;
+  int stations = 0;  // along its visible length
+  int fitted = 0;    // with an accepted step
+  int used = 0;      // of those, kept by the robust weights (weight > 0.5)
+  double rms_px = 0;  // of the used stations' distances to the projected edge at the final pose
+  double offset_px = 0;  // the edge's fitted offset from its projection (edge_bias_*), px
+};
+
+struct EdgePoseResult {
+  ExtrinsicsResult extrinsics;  // residuals_px: the points' at the final pose; covariance from all
+  std::vector<EdgeReport> edges;
+  int stations_used = 0;
+  double station_rms_px = 0;  // over the used stations
+};
+
+// The whole model-based refinement on an image: from `camera`'s pose (say, PnP from the snapped
+// points), `rounds` times: every model edge of `points` sampled at stations along its projection
+// (inside the image, clear of ends and other edges), the steps fitted (FitEdgeStation), stations
+// that disagree with their edge's polarity or strength left out, and the pose solved
+// (SolvePoseToEdges). `progress`, when set, is told each round's stations and RMS.
+[[nodiscard]] Result<EdgePoseResult> FitPoseToEdges(const cv::Mat& gray, const Camera& camera,
+                                                    const std::vector<PointCorrespondence>& points,
+                                                    const EdgeFitOptions& options, double click_sigma_px,
+                                                    const std::function<void(const std::string&)>& progress = {});
 
 // The Cramer-Rao bound on the camera position (world frame, m^2) when `points_in_world` are seen by
 // `camera` (at its pose) with independent Gaussian pixel noise of sigma_px per coordinate:
