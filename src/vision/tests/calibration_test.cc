@@ -298,6 +298,18 @@ TEST(CalibrationTest, ModelGuidedSnappingKeepsClicksWithoutEdges) {
   }
 }
 
+// Like the renderer's camera: blurred 0.85 px (the lens), Gaussian sensor noise, 8-bit.
+cv::Mat LensAndSensor(cv::Mat image_f32, double noise_sigma, std::mt19937& rng) {
+  cv::GaussianBlur(image_f32, image_f32, cv::Size(0, 0), 0.85);
+  std::normal_distribution<float> noise(0, static_cast<float>(noise_sigma));
+  for (int v = 0; v < image_f32.rows; ++v) {
+    for (int u = 0; u < image_f32.cols; ++u) image_f32.at<float>(v, u) += noise(rng);
+  }
+  cv::Mat out;
+  image_f32.convertTo(out, CV_8U);
+  return out;
+}
+
 // A synthetic image: a wedge of brightness `inside` on `outside`, its apex at `apex` (px), edges
 // along `dir_a` and `dir_b`; drawn 8x larger and averaged down (exact coverage to 1/64 px^2),
 // blurred like the renderer's lens (0.85 px) and given sensor noise.
@@ -312,17 +324,10 @@ cv::Mat Wedge(const Eigen::Vector2d& apex, const Eigen::Vector2d& dir_a, const E
   const std::vector<cv::Point> wedge{hi(apex), hi(apex + 100 * dir_a), hi(apex + 100 * dir_a + 100 * dir_b),
                                      hi(apex + 100 * dir_b)};
   cv::fillConvexPoly(big, wedge, cv::Scalar(inside), cv::LINE_8, 4);
-  cv::Mat small, noisy(size, size, CV_32F);
+  cv::Mat small, image;
   cv::resize(big, small, cv::Size(size, size), 0, 0, cv::INTER_AREA);
-  small.convertTo(noisy, CV_32F);
-  cv::GaussianBlur(noisy, noisy, cv::Size(0, 0), 0.85);
-  std::normal_distribution<float> noise(0, static_cast<float>(noise_sigma));
-  for (int y = 0; y < size; ++y) {
-    for (int x = 0; x < size; ++x) noisy.at<float>(y, x) += noise(rng);
-  }
-  cv::Mat out;
-  noisy.convertTo(out, CV_8U);
-  return out;
+  small.convertTo(image, CV_32F);
+  return LensAndSensor(image, noise_sigma, rng);
 }
 
 // Snapping a click to a corner: from clicks up to 2 px off, the edge lines' intersection lands
@@ -393,14 +398,7 @@ cv::Mat Step(const Eigen::Vector2d& on_line, const Eigen::Vector2d& n, double br
       image.at<float>(v, u) = static_cast<float>(dark + (bright - dark) * inside / 256.0);
     }
   }
-  cv::GaussianBlur(image, image, cv::Size(0, 0), 0.85);
-  std::normal_distribution<float> noise(0, static_cast<float>(noise_sigma));
-  for (int v = 0; v < 64; ++v) {
-    for (int u = 0; u < 64; ++u) image.at<float>(v, u) += noise(rng);
-  }
-  cv::Mat out;
-  image.convertTo(out, CV_8U);
-  return out;
+  return LensAndSensor(image, noise_sigma, rng);
 }
 
 // The model-based refinement's station fit: along a straight blurred step (noise 2 gray levels) a
