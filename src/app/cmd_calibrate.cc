@@ -241,7 +241,8 @@ void AddCalibrateCommand(CLI::App& app, Runner* run) {
   extr->add_option("--max-rms", ex->max_rms_px, "fail above this reprojection RMS, px")
       ->capture_default_str();
   extr->add_option("--click-sigma", ex->click_sigma_px,
-                   "assumed click noise per coordinate, px (for the predicted uncertainty only)")
+                   "assumed click noise per coordinate, px (the predicted uncertainty; with --snap or "
+                   "--edge-fit also the weight of the points that were not snapped)")
       ->capture_default_str();
   extr->add_flag("--snap,!--no-snap", ex->snap,
                  "move each click to the corner in the image where the edges near it meet (default off)");

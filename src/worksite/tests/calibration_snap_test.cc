@@ -17,6 +17,7 @@
 #include <optional>
 #include <random>
 
+#include "calibration_features.h"
 #include "fixtures.h"
 #include "teachsim/vision/calibration.h"
 #include "teachsim/worksite/render.h"
@@ -24,50 +25,8 @@
 namespace teachsim::worksite {
 namespace {
 
-// The six features docs/formats/camera.md recommends: the table's -x -y top corner, three outer top
-// corners of the frame's walls and the two inner top corners on the other diagonal.
-struct Feature {
-  std::string name;
-  std::string object;  // whose corner it is
-  Eigen::Vector3d p_in_world;
-  std::vector<Eigen::Vector3d> edges_in_world;  // the straight edges leaving the corner (direction x length)
-};
-
-std::vector<Feature> RecommendedFeatures(const scene::Scene& scene) {
-  const scene::SceneObject& table = scene.objects.at(static_cast<std::size_t>(scene.FindObject("table")));
-  const scene::SceneObject& frame = scene.objects.at(static_cast<std::size_t>(scene.FindObject("frame")));
-  geometry::Aabb walls;
-  double wall = 1e9;
-  for (const geometry::ShapePart& part : frame.shape.parts()) {
-    const geometry::Aabb b = part.convex->WorldBounds(frame.world_T_object * part.shape_T_part);
-    if (std::abs(b.min.z()) < 1e-6) {
-      walls.Extend(b);
-      wall = std::min(wall, (b.max - b.min).minCoeff());
-    }
-  }
-  const geometry::Aabb t = table.shape.WorldBounds(table.world_T_object);
-  const Eigen::Vector3d lo = walls.min, hi = walls.max;
-  const Eigen::Vector3d x = Eigen::Vector3d::UnitX(), y = Eigen::Vector3d::UnitY(),
-                        z = Eigen::Vector3d::UnitZ();
-  const Eigen::Vector3d size = hi - lo, table_size = t.max - t.min;
-  const double inner_x = size.x() - 2 * wall, inner_y = size.y() - 2 * wall;
-  return {
-      {"table corner -x-y",
-       "table",
-       {t.min.x(), t.min.y(), t.max.z()},
-       {x * table_size.x(), y * table_size.y(), -z * table_size.z()}},
-      {"outer top +x-y", "frame", {hi.x(), lo.y(), hi.z()}, {-x * size.x(), y * size.y(), -z * size.z()}},
-      {"outer top -x+y", "frame", {lo.x(), hi.y(), hi.z()}, {x * size.x(), -y * size.y(), -z * size.z()}},
-      {"outer top +x+y", "frame", {hi.x(), hi.y(), hi.z()}, {-x * size.x(), -y * size.y(), -z * size.z()}},
-      {"inner top +x-y",
-       "frame",
-       {hi.x() - wall, lo.y() + wall, hi.z()},
-       {-x * inner_x, y * inner_y, -z * size.z()}},
-      {"inner top -x+y",
-       "frame",
-       {lo.x() + wall, hi.y() - wall, hi.z()},
-       {x * inner_x, -y * inner_y, -z * size.z()}}};
-}
+using testing::Feature;
+using testing::RecommendedFeatures;
 
 // The scene's camera moved by up to `shift_m` and turned by up to `turn_rad` about a random axis
 // through the frame's centre's line of sight (so the work site stays in view).
@@ -126,12 +85,14 @@ double ShareBelow(const std::vector<double>& v, double limit) {
 }
 
 void Print(const char* label, const Summary& s) {
-  std::printf(
-      "%-34s trials %4zu  snap error px median %.3f p95 %.3f (unsnapped %d of %d)  position error mm "
-      "median %.2f p95 %.2f max %.2f  within 2 mm %.1f %%\n",
-      label, s.position_error_mm.size(), Quantile(s.snap_error_px, 0.5), Quantile(s.snap_error_px, 0.95),
-      s.unsnapped, s.points, Quantile(s.position_error_mm, 0.5), Quantile(s.position_error_mm, 0.95),
-      Quantile(s.position_error_mm, 1.0), 100 * ShareBelow(s.position_error_mm, 2.0));
+  std::printf("%-34s trials %4zu  ", label, s.position_error_mm.size());
+  if (!s.snap_error_px.empty()) {  // rows without snapping (or whose snaps are not measured) say nothing of it
+    std::printf("snap error px median %.3f p95 %.3f (unsnapped %d of %d)  ", Quantile(s.snap_error_px, 0.5),
+                Quantile(s.snap_error_px, 0.95), s.unsnapped, s.points);
+  }
+  std::printf("position error mm median %.2f p95 %.2f max %.2f  within 2 mm %.1f %%\n",
+              Quantile(s.position_error_mm, 0.5), Quantile(s.position_error_mm, 0.95),
+              Quantile(s.position_error_mm, 1.0), 100 * ShareBelow(s.position_error_mm, 2.0));
   for (const auto& [name, errors] : s.snap_error_by_feature_px) {
     std::printf("    %-20s snapped %3zu  error px median %.3f p95 %.3f max %.3f\n", name.c_str(),
                 errors.size(), Quantile(errors, 0.5), Quantile(errors, 0.95), Quantile(errors, 1.0));
