@@ -218,7 +218,7 @@ std::vector<ImageLine> DetectLines(const cv::Mat& image_gray8, const Camera& cam
   return DetectLinesAndEdges(image_gray8, camera, options).lines;
 }
 
-bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
+int SignedEdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
   static const double cos_tol = std::cos(25 * M_PI / 180);
   for (int o = 0; o <= 4; ++o) {
     const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
@@ -227,9 +227,14 @@ bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eig
     if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
     if (!edge_map.edges.at<uint8_t>(y, x)) continue;
     const float a = edge_map.direction.at<float>(y, x);
-    if (std::abs(std::cos(a) * normal.x() + std::sin(a) * normal.y()) >= cos_tol) return true;
+    const double c = std::cos(a) * normal.x() + std::sin(a) * normal.y();
+    if (std::abs(c) >= cos_tol) return c > 0 ? 1 : -1;
   }
-  return false;
+  return 0;
+}
+
+bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
+  return SignedEdgeAcross(edge_map, pixel, normal) != 0;
 }
 
 }  // namespace teachsim::vision

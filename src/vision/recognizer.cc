@@ -14,6 +14,8 @@
 #include <fstream>
 #include <map>
 #include <opencv2/flann.hpp>
+#include <opencv2/imgproc.hpp>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -69,6 +71,12 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(fraction("min_coverage", min_coverage));
   if (!(min_edge_contrast >= 0)) return Status::InvalidInput("RecognizerOptions::min_edge_contrast must be >= 0");
   TEACHSIM_RETURN_IF_ERROR(positive("max_reprojection_rms_px", max_reprojection_rms_px));
+  TEACHSIM_RETURN_IF_ERROR(fraction("min_evidence_score", min_evidence_score));
+  TEACHSIM_RETURN_IF_ERROR(fraction("accept_evidence_score", accept_evidence_score));
+  if (accept_evidence_score < min_evidence_score) {
+    return Status::InvalidInput("RecognizerOptions::accept_evidence_score = " + json::FormatNumber(accept_evidence_score) +
+                                " must be >= min_evidence_score = " + json::FormatNumber(min_evidence_score));
+  }
   TEACHSIM_RETURN_IF_ERROR(positive("work_area_radius_m", work_area_radius_m));
   TEACHSIM_RETURN_IF_ERROR(positive("support_tolerance_m", support_tolerance_m));
   if (!(below_table_tolerance_m >= 0)) return Status::InvalidInput("RecognizerOptions::below_table_tolerance_m must be >= 0");
@@ -455,11 +463,11 @@ struct Hypothesis {
 // is supported by a Canny edge within 2 px across the edge whose gradient is across the edge. Where
 // the image shows no contrast across the predicted edge (a lit face against the lit table) no edge
 // can be expected: such samples are uninformative and left out of `fraction` (but not `coverage`).
+// A candidate's edge support (from its PoseEvidence), for the ranking below.
 struct Support {
   double fraction = 0;      // supported / informative samples
   double coverage = 0;      // supported / all samples
   double supported_px = 0;  // supported length
-  int samples = 0;
 };
 float SampleGrey(const cv::Mat& m, const Eigen::Vector2d& p) {
   const double x = std::clamp(p.x(), 0.0, m.cols - 1.001), y = std::clamp(p.y(), 0.0, m.rows - 1.001);
@@ -469,8 +477,8 @@ float SampleGrey(const cv::Mat& m, const Eigen::Vector2d& p) {
                             fy * ((1 - fx) * m.at<uint8_t>(y0 + 1, x0) + fx * m.at<uint8_t>(y0 + 1, x0 + 1)));
 }
 // Samples every kOutlineSpacingPx along each visible predicted edge of a box in the image (the ends
-// left out: corners blur and shadows meet there): visit(point_in_camera, pixel, normal) with the
-// unit normal to the projected edge.
+// left out: corners blur and shadows meet there): visit(point_in_camera, pixel, normal, edge) with the
+// unit normal to the projected edge and the box edge's index.
 constexpr double kOutlineSpacingPx = 2.5;
 template <typename Visit>
 void ForEachOutlineSample(const Eigen::Vector3d& box_size_m, const geometry::Pose3& camera_T_object, const Camera& camera,
@@ -490,33 +498,11 @@ void ForEachOutlineSample(const Eigen::Vector3d& box_size_m, const geometry::Pos
       const auto c2 = camera.ProjectFromCamera(p + (t + 0.01) * (q - p));
       if (!c || !c2 || !camera.InImage(*c)) continue;
       const Eigen::Vector2d along = (*c2 - *c).normalized();
-      visit(point, *c, Eigen::Vector2d(-along.y(), along.x()));
+      visit(point, *c, Eigen::Vector2d(-along.y(), along.x()), e);
     }
   }
 }
 
-Support EdgeSupport(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                    const EdgeMap& edge_map, double min_contrast) {
-  Support out;
-  constexpr double kContrastOffsetPx = 2.5;
-  int supported = 0, informative = 0;
-  ForEachOutlineSample(model.box_size_m, camera_T_object, camera,
-                       [&](const Eigen::Vector3d&, const Eigen::Vector2d& c, const Eigen::Vector2d& normal) {
-                         ++out.samples;
-                         if (EdgeAcross(edge_map, c, normal)) {
-                           ++supported;
-                           ++informative;
-                         } else if (std::abs(SampleGrey(edge_map.smoothed, c + kContrastOffsetPx * normal) -
-                                             SampleGrey(edge_map.smoothed, c - kContrastOffsetPx * normal)) >=
-                                    min_contrast) {
-                           ++informative;
-                         }
-                       });
-  out.fraction = informative > 0 ? static_cast<double>(supported) / informative : 0;
-  out.coverage = out.samples > 0 ? static_cast<double>(supported) / out.samples : 0;
-  out.supported_px = supported * kOutlineSpacingPx;
-  return out;
-}
 // The ranking of the non-maximum suppression: supported length less the unsupported length of the
 // predicted outline, so that of two poses explaining the same image edges the one that predicts less
 // outline where the image shows nothing (an upright slab over a cube and the table) comes first. By
@@ -601,7 +587,7 @@ int HiddenSupportedSamples(const Model& behind_model, const geometry::Pose3& cam
   int hidden = 0;
   ForEachOutlineSample(
       behind_model.box_size_m, camera_T_behind, camera,
-      [&](const Eigen::Vector3d& point, const Eigen::Vector2d& c, const Eigen::Vector2d& normal) {
+      [&](const Eigen::Vector3d& point, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int) {
         // Segment camera -> point against the shrunk box (slab test), in front's frame.
         const Eigen::Vector3d target = front_T_camera * point;
         const Eigen::Vector3d d = target - origin;
@@ -619,6 +605,74 @@ int HiddenSupportedSamples(const Model& behind_model, const geometry::Pose3& cam
         if (t0 <= t1 && EdgeAcross(edge_map, c, normal)) ++hidden;
       });
   return hidden;
+}
+
+// The evidence for a pose (what verification decides on): matched lines and their residuals, and
+// edge support sample by sample along the visible predicted edges, leaving out the samples that
+// run along the fixed world's edges.
+PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                             const LineDetection& detection, const FixedEdgeMap* fixed, const RecognizerOptions& options,
+                             const EdgeMatchSet& set) {
+  const Eigen::Matrix3d K = camera.K();
+  PoseEvidence out;
+  out.matched_fraction = set.matched_fraction;
+  out.matches = static_cast<int>(set.matches.size());
+  if (!set.matches.empty()) {
+    out.rms_px = FitPoseToLines(model.box_size_m, K, camera_T_object, set.matches, 0, 0).rms_px;
+    out.rms_closest_px =
+        FitPoseToLines(model.box_size_m, K, camera_T_object, ClosestMatchesPerEdge(model, K, camera_T_object, set.matches), 0, 0)
+            .rms_px;
+  }
+  constexpr double kContrastOffsetPx = 2.5;
+  struct PerEdge {
+    int samples = 0, free = 0, supported = 0, plus = 0, minus = 0;
+    double length_px = 0;
+  };
+  std::array<PerEdge, 12> per_edge{};
+  int samples = 0, on_fixed = 0, supported = 0, informative = 0, free_supported = 0, free_informative = 0;
+  ForEachOutlineSample(model.box_size_m, camera_T_object, camera,
+                       [&](const Eigen::Vector3d&, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int e) {
+                         PerEdge& pe = per_edge[static_cast<size_t>(e)];
+                         ++samples;
+                         ++pe.samples;
+                         const int sign = SignedEdgeAcross(detection.edge_map, c, normal);
+                         const bool contrast =
+                             sign != 0 || std::abs(SampleGrey(detection.edge_map.smoothed, c + kContrastOffsetPx * normal) -
+                                                   SampleGrey(detection.edge_map.smoothed, c - kContrastOffsetPx * normal)) >=
+                                              options.min_edge_contrast;
+                         supported += sign != 0 ? 1 : 0;
+                         informative += contrast ? 1 : 0;
+                         if (fixed != nullptr && OnFixedEdge(*fixed, c, normal)) {
+                           ++on_fixed;
+                           return;
+                         }
+                         ++pe.free;
+                         if (sign != 0) {
+                           ++pe.supported;
+                           (sign > 0 ? pe.plus : pe.minus) += 1;
+                           ++free_supported;
+                         }
+                         free_informative += contrast ? 1 : 0;
+                       });
+  out.support_fraction = informative > 0 ? static_cast<double>(supported) / informative : 0;
+  out.coverage = samples > 0 ? static_cast<double>(supported) / samples : 0;
+  out.supported_px = supported * kOutlineSpacingPx;
+  out.fixed_share = samples > 0 ? static_cast<double>(on_fixed) / samples : 0;
+  out.free_support_fraction = free_informative > 0 ? static_cast<double>(free_supported) / free_informative : 0;
+  out.free_coverage = samples > 0 ? static_cast<double>(free_supported) / samples : 0;
+  out.free_supported_px = free_supported * kOutlineSpacingPx;
+  int majority = 0, signed_total = 0;
+  for (const PerEdge& pe : per_edge) {
+    majority += std::max(pe.plus, pe.minus);
+    signed_total += pe.plus + pe.minus;
+    if (pe.samples * kOutlineSpacingPx < 20) continue;
+    out.edges_visible += 1;
+    if (pe.free > 0 && 2 * pe.supported >= pe.free) out.edges_supported += 1;
+  }
+  out.polarity = signed_total > 0 ? static_cast<double>(majority) / signed_total : 0;
+  out.continued_ends = ContinuedEdgeEnds(model, camera, camera_T_object, detection.edge_map, 0.8, 0);
+  out.long_continued_ends = ContinuedEdgeEnds(model, camera, camera_T_object, detection.edge_map, 0.7, 0.8);
+  return out;
 }
 
 struct Candidate {
@@ -703,19 +757,103 @@ std::string Mm(double m) {
 
 }  // namespace
 
+FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& camera) {
+  FixedEdgeMap out;
+  out.direction = cv::Mat(camera.height(), camera.width(), CV_32F, cv::Scalar(10.0));
+  if (fixed_world == nullptr) return out;
+  const geometry::Pose3& world_T_camera = camera.world_T_camera();
+  const geometry::Pose3 camera_T_world = world_T_camera.Inverse();
+  constexpr double kStepPx = 6, kHalfWidthPx = 2, kMarginPx = 50;
+  constexpr int kMaxSteps = 400;
+  for (const scene::SceneObject& o : fixed_world->objects) {
+    if (!o.fixed) continue;
+    for (const geometry::ShapePart& part : o.shape.parts()) {
+      const geometry::Pose3 camera_T_part = camera_T_world * o.world_T_object * part.shape_T_part;
+      const Eigen::Vector3d eye_in_part = camera_T_part.Inverse().translation;
+      const auto& vertices = part.convex->vertices();
+      const auto& faces = part.convex->faces();
+      for (const geometry::Edge& e : part.convex->edges()) {
+        const Eigen::Vector3d& a = vertices[static_cast<size_t>(e.v0)];
+        const Eigen::Vector3d& b = vertices[static_cast<size_t>(e.v1)];
+        // Shown when a face beside it faces the camera (the fixed parts hiding each other is ignored:
+        // a hidden edge then only makes a few samples uninformative).
+        auto facing = [&](int f) {
+          const geometry::Face& face = faces[static_cast<size_t>(f)];
+          return face.normal.dot(eye_in_part) > face.offset;
+        };
+        if (!facing(e.f0) && !facing(e.f1)) continue;
+        const Eigen::Vector3d pa = camera_T_part * a, pb = camera_T_part * b;
+        auto project = [&](double t) -> std::optional<Eigen::Vector2d> {
+          auto q = camera.ProjectFromCamera(pa + (pb - pa) * t);
+          if (q && (q->x() < -kMarginPx || q->y() < -kMarginPx || q->x() > camera.width() + kMarginPx ||
+                    q->y() > camera.height() + kMarginPx)) {
+            q.reset();
+          }
+          return q;
+        };
+        // The part of the edge in view, from a coarse pass (an edge that passes near the camera plane,
+        // the table's, projects to thousands of pixels, mostly outside), then steps of about kStepPx.
+        constexpr int kCoarse = 64;
+        int first = kCoarse + 1, last = -1;
+        double length_px = 0;
+        std::optional<Eigen::Vector2d> before;
+        for (int i = 0; i <= kCoarse; ++i) {
+          const auto q = project(static_cast<double>(i) / kCoarse);
+          if (!q) continue;
+          first = std::min(first, i), last = std::max(last, i);
+          if (before) length_px += (*q - *before).norm();
+          before = q;
+        }
+        if (last < 0) continue;
+        const double t0 = std::max(0, first - 1) / static_cast<double>(kCoarse);
+        const double t1 = std::min(kCoarse, last + 1) / static_cast<double>(kCoarse);
+        const int n = std::clamp(static_cast<int>(length_px / kStepPx) + 1, 1, kMaxSteps);
+        std::optional<Eigen::Vector2d> prev;
+        for (int i = 0; i <= n; ++i) {
+          const auto q = project(t0 + (t1 - t0) * (static_cast<double>(i) / n));
+          if (q && prev && (*q - *prev).norm() > 1e-6) {
+            double angle = std::atan2((*q - *prev).y(), (*q - *prev).x());
+            if (angle < 0) angle += M_PI;
+            if (angle >= M_PI) angle -= M_PI;
+            cv::line(out.direction, cv::Point2d(prev->x(), prev->y()), cv::Point2d(q->x(), q->y()), cv::Scalar(angle),
+                     static_cast<int>(2 * kHalfWidthPx + 1), cv::LINE_8);
+          }
+          prev = q;
+        }
+      }
+    }
+  }
+  return out;
+}
+
+bool OnFixedEdge(const FixedEdgeMap& fixed, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
+  const int x = static_cast<int>(std::lround(pixel.x())), y = static_cast<int>(std::lround(pixel.y()));
+  if (fixed.direction.empty() || x < 0 || y < 0 || x >= fixed.direction.cols || y >= fixed.direction.rows) return false;
+  const float a = fixed.direction.at<float>(y, x);
+  if (a > 4) return false;
+  // The fixed edge's direction against the predicted edge's (the normal turned by 90 deg).
+  return std::abs(std::cos(a) * normal.y() - std::sin(a) * normal.x()) >= std::cos(15 * M_PI / 180);
+}
+
 PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                          const LineDetection& detection, const RecognizerOptions& options) {
-  PoseEvidence out;
+                          const LineDetection& detection, const RecognizerOptions& options, const FixedEdgeMap* fixed) {
   const EdgeMatchSet set = MatchEdges(model, camera.K(), camera_T_object, detection.lines, options.match_distance_px,
                                       options.match_angle_deg * M_PI / 180);
-  out.matched_fraction = set.matched_fraction;
-  out.matches = static_cast<int>(set.matches.size());
-  if (!set.matches.empty()) out.rms_px = FitPoseToLines(model.box_size_m, camera.K(), camera_T_object, set.matches, 0, 0).rms_px;
-  const Support support = EdgeSupport(model, camera, camera_T_object, detection.edge_map, options.min_edge_contrast);
-  out.support_fraction = support.fraction;
-  out.coverage = support.coverage;
-  out.supported_px = support.supported_px;
-  return out;
+  return ComputeEvidence(model, camera, camera_T_object, detection, fixed, options, set);
+}
+
+double EvidenceScore(const PoseEvidence& e) {
+  // tools/fit_evidence_weights.py on the benchmark's renders, seed 7 (3153 fitted hypotheses, 206 of
+  // them true; true ones weighted 5x, L2 penalty 1). The residuals are capped at 4 px: beyond that a
+  // pose is as wrong as it gets, and a stray far line should not outweigh the rest.
+  constexpr double kIntercept = -1.2081;
+  const double edges_supported_fraction = e.edges_supported / std::max(e.edges_visible, 1.0);
+  const double z = kIntercept + 5.7798 * e.matched_fraction - 3.8504 * e.support_fraction + 3.3347 * e.coverage -
+                   1.6577 * std::min(e.rms_px, 4.0) - 0.5741 * std::min(e.rms_closest_px, 4.0) -
+                   0.9501 * e.continued_ends + 0.2021 * e.long_continued_ends - 2.4361 * e.fixed_share -
+                   3.6022 * e.free_support_fraction + 5.0157 * e.free_coverage + 1.2843 * e.polarity -
+                   0.6333 * edges_supported_fraction - 0.3539 * e.edges_visible + 1.0490 * e.edges_supported;
+  return 1 / (1 + std::exp(-z));
 }
 
 const char* LossStageName(LossStage stage) {
@@ -918,6 +1056,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     }
   }
   const geometry::Pose3& world_T_camera = camera.world_T_camera();
+  const FixedEdgeMap fixed_edges = ProjectFixedEdges(fixed_world, camera);
 
   // 4-5. pose fitting and verification: the support-plane hypotheses (ranked by edge support),
   // then the index's most probable hypotheses.
@@ -953,58 +1092,49 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       reject(Outcome::kMatchedFraction);
       return;
     }
-    // RMS of the matched segments against the final pose, all of them; when only the segments
-    // closest to each predicted edge are within the limit (a shadow or grain line runs beside an
-    // edge), the pose must show stronger evidence: support along most of the predicted outline and
-    // no image edges running on past its corners (a wrong, smaller model fitted onto part of a
-    // real block). Benchmark's renders: all of them, 102 of 193 found (>= 0.7 visible); the closest
-    // ones alone, 122 but false positives 0.12 -> 0.68 per image; with these checks (and the
-    // occlusion test and ranking in the selection below), 118 and 0.05 false positives per image
-    // (the dev set unchanged: 30 of 38, none false).
-    const double rms_all = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, set.matches, 0, 0).rms_px;
-    bool trimmed_rms = false;
-    fit.rms_px = rms_all;
-    if (rms_all > options_.max_reprojection_rms_px) {
-      const std::vector<LineMatch> closest = ClosestMatchesPerEdge(model, K, fit.camera_T_object, set.matches);
-      fit.rms_px = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, closest, 0, 0).rms_px;
-      trimmed_rms = true;
-    }
-    if (fit.rms_px > options_.max_reprojection_rms_px) {
-      reject(Outcome::kReprojection);
-      return;
-    }
-    const Support support = EdgeSupport(model, camera, fit.camera_T_object, detection.edge_map,
-                                        options_.min_edge_contrast);
-    if (support.fraction < options_.min_score || support.coverage < options_.min_coverage) {
-      reject(Outcome::kSupport);
-      return;
-    }
-    const int continued_ends = ContinuedEdgeEnds(model, camera, fit.camera_T_object, detection.edge_map, 0.8, 0);
-    if (trimmed_rms && (set.matched_fraction < kTrimmedMinMatchedFraction || support.coverage < kTrimmedMinCoverage ||
-                        continued_ends > kTrimmedMaxContinuedEnds)) {
-      reject(Outcome::kSupport);
-      return;
-    }
-    // Part of a larger straight-edged thing (a cube fitted onto a bar, an upright block onto the
-    // dark cylinder): image edges run on past two or more of its corners for most of the edge's
-    // length, while little of its own outline is supported.
-    const int long_continued = ContinuedEdgeEnds(model, camera, fit.camera_T_object, detection.edge_map, 0.7, 0.8);
-    if (long_continued >= kPartMinContinuedEnds && support.coverage < kPartMaxCoverage) {
-      reject(Outcome::kSupport);
-      return;
-    }
-    reject(Outcome::kImplausible);
     // Culling (§7.1): outside the work site, under the table, inside a fixed object.
     const geometry::Pose3 world_T_object = world_T_camera * fit.camera_T_object;
-    if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m) return;
+    if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m) return reject(Outcome::kImplausible);
     double zmin = 1e9;
     for (const Eigen::Vector3d& v : BoxWorldVertices(model, world_T_object)) zmin = std::min(zmin, v.z());
-    if (zmin < table_top_z - options_.below_table_tolerance_m) return;
+    if (zmin < table_top_z - options_.below_table_tolerance_m) return reject(Outcome::kImplausible);
     for (const FixedPart& part : fixed_parts) {
       if (PartPenetration(model, world_T_object, part, false).depth_m > std::max(0.005, 0.2 * model.box_size_m.minCoeff())) {
-        return;
+        return reject(Outcome::kImplausible);
       }
     }
+    const PoseEvidence evidence =
+        ComputeEvidence(model, camera, fit.camera_T_object, detection, &fixed_edges, options_, set);
+    // The rules after the matched share: the RMS of all matched segments against the final pose, or,
+    // when only the segments closest to each predicted edge are within the limit (a shadow or grain
+    // line runs beside an edge), stronger evidence: support along most of the predicted outline and no image
+    // edges running on past its corners (a wrong, smaller model fitted onto part of a real block);
+    // edge support; not part of a larger straight-edged thing (a cube fitted onto a bar, an upright
+    // block onto the dark cylinder: image edges run on past two or more of its corners for most of
+    // the edge's length while little of its own outline is supported).
+    const bool trimmed_rms = evidence.rms_px > options_.max_reprojection_rms_px;
+    fit.rms_px = trimmed_rms ? std::min(evidence.rms_px, evidence.rms_closest_px) : evidence.rms_px;
+    Outcome rule = Outcome::kCandidate;
+    if (fit.rms_px > options_.max_reprojection_rms_px) {
+      rule = Outcome::kReprojection;
+    } else if (evidence.support_fraction < options_.min_score || evidence.coverage < options_.min_coverage ||
+               (trimmed_rms && (evidence.matched_fraction < kTrimmedMinMatchedFraction ||
+                                evidence.coverage < kTrimmedMinCoverage ||
+                                evidence.continued_ends > kTrimmedMaxContinuedEnds)) ||
+               (evidence.long_continued_ends >= kPartMinContinuedEnds && evidence.coverage < kPartMaxCoverage)) {
+      rule = Outcome::kSupport;
+    }
+    // The evidence score over all of it (EvidenceScore): required of a pose that passes the rules,
+    // and enough on its own when it is high.
+    const double score = EvidenceScore(evidence);
+    if (rule == Outcome::kCandidate ? score < options_.min_evidence_score : score < options_.accept_evidence_score) {
+      reject(rule == Outcome::kCandidate ? Outcome::kEvidence : rule);
+      return;
+    }
+    Support support;
+    support.fraction = evidence.support_fraction;
+    support.coverage = evidence.coverage;
+    support.supported_px = evidence.supported_px;
     reject(Outcome::kCandidate);
     Candidate c;
     c.trace_index = traced != nullptr ? static_cast<int>(trace->fitted.size()) - 1 : -1;

@@ -11,6 +11,8 @@
 #include <random>
 
 #include "synthetic_scene.h"
+#include "teachsim/geometry/aabb.h"
+#include "teachsim/scene/scene.h"
 #include "teachsim/vision/recognition_stages.h"
 
 namespace teachsim::vision {
@@ -160,6 +162,11 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o = RecognizerOptions();
   o.max_support_hypotheses = 0;
   EXPECT_NE(o.Validate().message().find("max_support_hypotheses"), std::string::npos);
+  o = RecognizerOptions();
+  o.accept_evidence_score = 0.1;  // below min_evidence_score
+  EXPECT_NE(o.Validate().message().find("accept_evidence_score = 0.1 must be >= min_evidence_score"),
+            std::string::npos)
+      << o.Validate().message();
 }
 
 std::string WriteTemp(const std::string& name, const std::string& text) {
@@ -435,6 +442,67 @@ TEST(RecognizerTest, TheSupportSourceCanBeSwitchedOff) {
       EXPECT_EQ(support_fits, 0);
     }
   }
+}
+
+// The evidence score (what verification decides on besides its rules): the true pose of a rendered
+// block scores above accept_evidence_score; the same block's outline moved by a quarter of its length,
+// or turned by 90 degrees about the vertical, scores below min_evidence_score. (A smaller model
+// fitted onto one end of the block scores high too; the selection drops it for the whole block.)
+TEST(VerificationTest, TheEvidenceScoreSeparatesTheTruePoseFromWrongOnes) {
+  const Camera camera = SyntheticCamera();
+  const geometry::Pose3 bar = OnTable(Bar().box_size_m, 0.02, -0.01, 0.4);
+  const cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar}}, 11);
+  const RecognizerOptions options;
+  const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+  auto score = [&](const Model& model, const geometry::Pose3& world_T_object) {
+    return EvidenceScore(EvaluatePose(model, camera, camera.camera_T_world() * world_T_object, detection, options));
+  };
+  const double truth = score(Bar(), bar);
+  EXPECT_GE(truth, options.accept_evidence_score);
+  geometry::Pose3 shifted = bar;
+  shifted.translation += bar.Rotate(Eigen::Vector3d(0.25 * Bar().box_size_m.x(), 0, 0));
+  const double moved = score(Bar(), shifted);
+  EXPECT_LT(moved, options.min_evidence_score);
+  const geometry::Pose3 turned = OnTable(Bar().box_size_m, 0.02, -0.01, 0.4 + M_PI / 2);
+  const double crossing = score(Bar(), turned);
+  EXPECT_LT(crossing, options.min_evidence_score);
+  std::printf("evidence score: true pose %.3f, moved by a quarter of its length %.3f, turned 90 deg %.3f\n", truth,
+              moved, crossing);
+}
+
+// The fixed world's edges, projected: a predicted edge along one of them is explained already; one
+// across it, or away from it, is not.
+TEST(VerificationTest, FixedEdgesAreFoundAlongTheProjectedFrame) {
+  auto scene = scene::LoadScene(std::string(TEACHSIM_SOURCE_DIR) + "/scenes/puzzle.json");
+  ASSERT_TRUE(scene.ok());
+  auto camera = Camera::FromSpec(scene->cameras.at(0));
+  ASSERT_TRUE(camera.ok());
+  const FixedEdgeMap fixed = ProjectFixedEdges(&*scene, *camera);
+  ASSERT_EQ(fixed.direction.cols, camera->width());
+  // The frame's highest outer top edge along x: its middle, seen from the scene's camera.
+  const scene::SceneObject& frame = scene->objects.at(static_cast<std::size_t>(scene->FindObject("frame")));
+  geometry::Aabb walls;
+  for (const geometry::ShapePart& part : frame.shape.parts()) {
+    const geometry::Aabb b = part.convex->WorldBounds(frame.world_T_object * part.shape_T_part);
+    if (std::abs(b.min.z()) < 1e-6) walls.Extend(b);  // the walls stand on the table (the lip does not)
+  }
+  int checked = 0;
+  for (const double y : {walls.min.y(), walls.max.y()}) {
+    const Eigen::Vector3d a(walls.min.x(), y, walls.max.z()), b(walls.max.x(), y, walls.max.z());
+    const auto pa = camera->Project(a + 0.45 * (b - a)), pb = camera->Project(a + 0.55 * (b - a));
+    if (!pa || !pb || !camera->InImage(*pa) || !camera->InImage(*pb)) continue;
+    const Eigen::Vector2d mid = 0.5 * (*pa + *pb), along = (*pb - *pa).normalized();
+    const Eigen::Vector2d normal(-along.y(), along.x());
+    EXPECT_TRUE(OnFixedEdge(fixed, mid, normal)) << mid.transpose() << ": " << fixed.direction.at<float>(
+        static_cast<int>(std::lround(mid.y())), static_cast<int>(std::lround(mid.x())));
+    EXPECT_FALSE(OnFixedEdge(fixed, mid, along));  // a predicted edge across the fixed one
+    EXPECT_FALSE(OnFixedEdge(fixed, mid + 12 * normal, normal));
+    ++checked;
+  }
+  EXPECT_GE(checked, 1);
+  // No fixed world: nothing is explained.
+  const FixedEdgeMap none = ProjectFixedEdges(nullptr, *camera);
+  EXPECT_FALSE(OnFixedEdge(none, Eigen::Vector2d(320, 240), Eigen::Vector2d(1, 0)));
 }
 
 TEST(RecognizerTest, RejectsImagesThatDoNotFitTheCamera) {

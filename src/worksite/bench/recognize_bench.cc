@@ -8,11 +8,13 @@
 // error, reprojection RMS and time per image (thread CPU time, one OpenCV thread).
 // Environment: TEACHSIM_HOME (repository), TEACHSIM_SHARED (../shared), TEACHSIM_CACHE_DIR
 // (templates and index; default: bench-cache beside the executable, in the build folder);
+// TEACHSIM_RECOGNIZE_DUMP=DIR draws the images with a miss or a false detection (see DumpCase);
 // TEACHSIM_RECOGNIZE_DEBUG=1 prints every LINE-MOD match beside the truth (and, for the recognizer,
 // each image's stage counts and times, each object it missed with the stage that lost it and the
 // evidence at the true pose, and each false detection); TEACHSIM_RECOGNIZE_NO_PEER=1 leaves LINE-MOD
 // out (for quick runs while working on the recognizer); TEACHSIM_RECOGNIZE_ABLATION runs the
-// recognizer with one option changed (see below: no-support, plane-only, index-N, contrast-X, score-X). For teachsim, every scored object is put down
+// recognizer with one option changed (see below: no-support, plane-only, index-N, contrast-X, score-X, evidence-X, accept-X,
+// rules-only). For teachsim, every scored object is put down
 // to the stage that lost it (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
 
@@ -30,6 +32,7 @@
 
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "linemod_peer.h"
 #include "teachsim/base/bench_registry.h"
@@ -287,6 +290,107 @@ std::optional<vision::FitResult> RefineWithFit(const Eigen::Vector3d& size, cons
   return fit;
 }
 
+// TEACHSIM_RECOGNIZE_DUMP=DIR: each image with a missed block or a false detection, as DIR/NAME.png
+// with the truth's visible edges (green), found recognitions (blue) and false ones (red).
+void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camera,
+              const std::map<std::string, Eigen::Vector3d>& sizes, const std::vector<vision::Recognition>& objects,
+              const vision::ImageEvaluation& evaluation) {
+  bool interesting = evaluation.false_positives > 0;
+  for (const vision::ObjectOutcome& o : evaluation.objects) interesting = interesting || o.detection < 0;
+  if (!interesting) return;
+  cv::Mat out;
+  cv::cvtColor(c.image, out, cv::COLOR_GRAY2BGR);
+  auto draw = [&](const std::string& model, const geometry::Pose3& world_T_object, const cv::Scalar& colour) {
+    const Eigen::Vector3d size = sizes.at(model);
+    const geometry::Pose3 camera_T_object = camera.camera_T_world() * world_T_object;
+    const std::uint16_t visible = vision::VisibleBoxEdges(size, camera_T_object.Inverse().translation);
+    for (int e = 0; e < 12; ++e) {
+      if ((visible >> e & 1) == 0) continue;
+      const Eigen::Vector3d a = camera_T_object * vision::BoxVertex(size, vision::kBoxEdges[static_cast<std::size_t>(e)][0]);
+      const Eigen::Vector3d b = camera_T_object * vision::BoxVertex(size, vision::kBoxEdges[static_cast<std::size_t>(e)][1]);
+      std::optional<Eigen::Vector2d> prev;
+      for (int i = 0; i <= 10; ++i) {
+        const auto p = camera.ProjectFromCamera(a + (b - a) * (i / 10.0));
+        if (p && prev) cv::line(out, cv::Point2d(prev->x(), prev->y()), cv::Point2d(p->x(), p->y()), colour, 1, cv::LINE_AA);
+        prev = p;
+      }
+    }
+  };
+  for (const vision::TruthObject& t : c.truth) draw(t.model, t.world_T_object, cv::Scalar(0, 200, 0));
+  for (std::size_t d = 0; d < objects.size(); ++d) {
+    const bool fp = evaluation.detection_truth[d] == -1;
+    draw(objects[d].model, objects[d].world_T_object, fp ? cv::Scalar(0, 0, 255) : cv::Scalar(255, 128, 0));
+    auto p = camera.Project(objects[d].world_T_object.translation);
+    if (p && fp) cv::putText(out, objects[d].model, cv::Point2d(p->x(), p->y()), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(0, 0, 255));
+  }
+  cv::imwrite(dir + "/" + c.name + (c.name.size() > 4 && c.name.substr(c.name.size() - 4) == ".png" ? "" : ".png"), out);
+}
+
+const char* OutcomeName(vision::RecognitionTrace::Outcome outcome) {
+  using Outcome = vision::RecognitionTrace::Outcome;
+  switch (outcome) {
+    case Outcome::kFitFailed: return "fit_failed";
+    case Outcome::kMatchedFraction: return "matched_fraction";
+    case Outcome::kReprojection: return "reprojection";
+    case Outcome::kSupport: return "support";
+    case Outcome::kEvidence: return "evidence";
+    case Outcome::kImplausible: return "implausible";
+    case Outcome::kCandidate: return "candidate";
+  }
+  return "?";
+}
+
+// TEACHSIM_RECOGNIZE_FEATURES=FILE: appends one row per fitted hypothesis (not failed) with the
+// evidence at its fitted pose (vision::EvaluatePose) and whether it lies on a true block of its
+// model (mean distance of the projected vertices to the truth's nearest ones < 3 px): the data for
+// choosing the verification rule.
+void AppendFeatures(const std::string& path, const std::string& set_name, const Case& c, const vision::Camera& camera,
+                    const vision::ModelLibrary& library, const vision::LineDetection& detection,
+                    const vision::FixedEdgeMap& fixed, const vision::RecognizerOptions& options,
+                    const vision::RecognitionTrace& trace) {
+  std::FILE* f = std::fopen(path.c_str(), "a");
+  if (f == nullptr) return;
+  const Eigen::Matrix3d K = camera.K();
+  auto vertices_px = [&](const Eigen::Vector3d& size, const geometry::Pose3& camera_T_object,
+                         std::array<Eigen::Vector2d, 8>* px) {
+    for (int i = 0; i < 8; ++i) {
+      const Eigen::Vector3d p = camera_T_object * vision::BoxVertex(size, i);
+      if (p.z() <= 1e-3) return false;
+      (*px)[static_cast<std::size_t>(i)] = (K * p).hnormalized();
+    }
+    return true;
+  };
+  for (const vision::RecognitionTrace::Fitted& fitted : trace.fitted) {
+    if (fitted.outcome == vision::RecognitionTrace::Outcome::kFitFailed) continue;
+    const vision::Model& model = library.models[static_cast<std::size_t>(fitted.model)];
+    std::array<Eigen::Vector2d, 8> px;
+    if (!vertices_px(model.box_size_m, fitted.camera_T_object, &px)) continue;
+    double best = 1e9, visible = 0;
+    for (const vision::TruthObject& t : c.truth) {
+      if (t.model != model.name) continue;
+      std::array<Eigen::Vector2d, 8> tp;
+      if (!vertices_px(model.box_size_m, camera.camera_T_world() * t.world_T_object, &tp)) continue;
+      double sum = 0;
+      for (const Eigen::Vector2d& q : tp) {
+        double nearest = 1e9;
+        for (const Eigen::Vector2d& p : px) nearest = std::min(nearest, (p - q).norm());
+        sum += nearest;
+      }
+      if (sum / 8 < best) best = sum / 8, visible = t.visible_fraction;
+    }
+    const vision::PoseEvidence e = vision::EvaluatePose(model, camera, fitted.camera_T_object, detection, options, &fixed);
+    std::fprintf(f,
+                 "%s\t%s\t%s\t%d\t%s\t%d\t%.2f\t%.3f\t%.4f\t%.4f\t%.4f\t%.1f\t%.3f\t%.3f\t%d\t%d\t%d\t%.4f\t%.4f\t%.4f"
+                 "\t%.1f\t%.4f\t%.0f\t%.0f\t%.4f\n",
+                 set_name.c_str(), c.name.c_str(), model.name.c_str(), fitted.group_kind, OutcomeName(fitted.outcome),
+                 fitted.accepted ? 1 : 0, best, visible, e.matched_fraction, e.support_fraction, e.coverage,
+                 e.supported_px, e.rms_px, e.rms_closest_px, e.matches, e.continued_ends, e.long_continued_ends,
+                 e.fixed_share, e.free_support_fraction, e.free_coverage, e.free_supported_px, e.polarity,
+                 e.edges_supported, e.edges_visible, vision::EvidenceScore(e));
+  }
+  std::fclose(f);
+}
+
 // --- Methods and the run -----------------------------------------------------------------------------
 
 const char* const kMethods[] = {"teachsim", "teachsim_raw_pose", "linemod", "linemod_fit"};
@@ -330,6 +434,10 @@ int Run(const BenchArgs& args) {
     if (a.rfind("index-", 0) == 0) recognizer_options.max_hypotheses = std::atoi(a.c_str() + 6);
     if (a.rfind("contrast-", 0) == 0) recognizer_options.min_edge_contrast = std::atof(a.c_str() + 9);
     if (a.rfind("score-", 0) == 0) recognizer_options.min_score = std::atof(a.c_str() + 6);
+    // The evidence score's two thresholds; rules-only is the verification before the score.
+    if (a.rfind("evidence-", 0) == 0) recognizer_options.min_evidence_score = std::atof(a.c_str() + 9);
+    if (a.rfind("accept-", 0) == 0) recognizer_options.accept_evidence_score = std::atof(a.c_str() + 7);
+    if (a == "rules-only") recognizer_options.min_evidence_score = 0, recognizer_options.accept_evidence_score = 1;
   }
   auto recognizer = vision::Recognizer::Create(library, recognizer_options, cache_dir);
   const double recognizer_setup_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -420,6 +528,13 @@ int Run(const BenchArgs& args) {
                          r.world_T_object.translation.z() * 1000, r.score, r.matched_edge_fraction,
                          r.reprojection_rms_px);
           }
+        }
+        if (const char* features = std::getenv("TEACHSIM_RECOGNIZE_FEATURES"); features != nullptr) {
+          AppendFeatures(features, sets[s].description.find("seed") != std::string::npos ? "render" : "dev", c, *camera,
+                         library, detection, vision::ProjectFixedEdges(&fixed_world, *camera), recognizer->options(), trace);
+        }
+        if (const char* dump_dir = std::getenv("TEACHSIM_RECOGNIZE_DUMP"); evaluation.ok() && dump_dir != nullptr) {
+          DumpCase(dump_dir, c, *camera, truth->model_sizes_m, recognized->objects, *evaluation);
         }
         for (std::size_t i = 0; i < c.truth.size(); ++i) {
           const vision::TruthObject& t = c.truth[i];

@@ -38,6 +38,8 @@ struct EdgeMap {
 // Whether a predicted edge through `pixel` (distorted image; `normal` its unit normal) has a Canny
 // edge pixel within 2 px across it whose gradient runs across it (within 25 deg): edge support.
 bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal);
+// The same with the sign of that edge pixel's gradient along `normal`: +1 or -1, 0 where none is.
+int SignedEdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal);
 struct LineDetection {
   EdgeMap edge_map;
   std::vector<ImageLine> lines;  // undistorted px
@@ -201,6 +203,14 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
                                                  const RecognizerOptions& options);
 
 // ---- item 5: the evidence for a pose (what verification decides on).
+// The known fixed world's visible edges in the (distorted) image: a block's predicted edge lying
+// along one of them is explained by the fixed world already and is no evidence for the block.
+struct FixedEdgeMap {
+  cv::Mat direction;  // CV_32F: image direction of the fixed edge within 2 px, rad in [0, pi); > 4 where none
+};
+FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& camera);
+// Whether a predicted edge through `pixel` with unit `normal` runs along a fixed edge (within 15 deg).
+bool OnFixedEdge(const FixedEdgeMap& fixed, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal);
 struct PoseEvidence {
   double matched_fraction = 0;  // of the visible predicted edge length covered by matched lines
   double support_fraction = 0;  // of the informative sample points along the visible edges (an edge pixel
@@ -208,10 +218,27 @@ struct PoseEvidence {
   double coverage = 0;          // supported sample points of all sample points along the visible edges
   double supported_px = 0;      // supported length, px
   double rms_px = 0;            // of the matched lines' endpoints to their predicted edges
+  double rms_closest_px = 0;    // the same over each predicted edge's closest lines (a shadow line beside it left out)
   int matches = 0;
+  int continued_ends = 0;       // edge ends where an image edge runs on past the corner (see ContinuedEdgeEnds)
+  int long_continued_ends = 0;  // ... for most of the edge's length
+  // Leaving out the samples along the fixed world's edges (explained already):
+  double fixed_share = 0;       // of the samples, those along a fixed edge
+  double free_support_fraction = 0, free_coverage = 0, free_supported_px = 0;
+  double polarity = 0;          // of the supported samples, those whose edge's gradient has its edge's majority sign
+  double edges_supported = 0;   // visible edges of >= 20 px with half their free samples supported
+  double edges_visible = 0;     // visible edges of >= 20 px
 };
 PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                          const LineDetection& detection, const RecognizerOptions& options);
+                          const LineDetection& detection, const RecognizerOptions& options,
+                          const FixedEdgeMap* fixed = nullptr);
+// How likely the evidence is of a true pose (within 3 px of a real block of the model), 0..1: a
+// logistic regression over the evidence's fields, fitted by tools/fit_evidence_weights.py on the
+// hypotheses of the benchmark's rendered scenes (seed 7) and checked on scenes it never saw (seeds 8
+// and 9) and on the POV-Ray dev set (docs/benchmarks.md). Verification accepts a pose that passes
+// its rules with a score >= RecognizerOptions::min_evidence_score, or any pose with a score >=
+// RecognizerOptions::accept_evidence_score.
+double EvidenceScore(const PoseEvidence& evidence);
 
 // ---- measuring: at which stage the recognizer lost a true object (issue 7's "measure first").
 enum class LossStage : uint8_t {
