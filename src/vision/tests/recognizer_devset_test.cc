@@ -152,9 +152,9 @@ TEST(DevSetTest, RecognizesTheBlocksOfTheTwelveImages) {
   // Thresholds met on this set (see the report; the goals are higher in places).
   // Recall is below the goal (98 %) and is the known weakness (see the report); the
   // support-plane hypotheses raised it from 21 to 27 of 38 (the index alone fails this threshold),
-  // the robust fits to 33; the evidence score took the last false positive away (rules alone: 1).
+  // the robust fits to 33, the evidence score to 35 and it took the last false positive away.
   // False positives, accuracy and time meet it.
-  EXPECT_GE(bins[0].found, static_cast<int>(0.84 * bins[0].objects));
+  EXPECT_GE(bins[0].found, static_cast<int>(0.86 * bins[0].objects));
   EXPECT_EQ(false_positives, 0);
   EXPECT_LT(median(rotation_errors_deg), 0.5);
   EXPECT_LT(max(rotation_errors_deg), 1.0);

@@ -234,8 +234,8 @@ PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geomet
                           const FixedEdgeMap* fixed = nullptr);
 // How likely the evidence is of a true pose (within 3 px of a real block of the model), 0..1: a
 // logistic regression over the evidence's fields, fitted by tools/fit_evidence_weights.py on the
-// hypotheses of the benchmark's rendered scenes (seed 7) and checked on scenes it never saw (seeds 8
-// and 9) and on the POV-Ray dev set (docs/benchmarks.md). Verification accepts a pose that passes
+// hypotheses of the benchmark's rendered scenes (seeds 7 and 8) and checked on scenes it never saw
+// (seeds 9-13) and on the POV-Ray dev set (docs/benchmarks.md). Verification accepts a pose that passes
 // its rules with a score >= RecognizerOptions::min_evidence_score, or any pose with a score >=
 // RecognizerOptions::accept_evidence_score.
 double EvidenceScore(const PoseEvidence& evidence);

@@ -81,10 +81,11 @@ struct RecognizerOptions {
   double max_reprojection_rms_px = 1.0;      // matched segments' RMS distance to predicted edges, px (above 1 px the
                                              // dev set's recognitions were the right block but up to 2 deg off)
   // The evidence score (EvidenceScore, 0..1): a pose that passes the rules above needs min_evidence_score
-  // (it drops most false poses that the rules let through: on the benchmark's held-out renders 82 -> 24
-  // false candidates, none of the true lost); one that fails a rule is still accepted at
-  // accept_evidence_score (true poses whose matched lines include a shadow or grain line beside an edge).
-  double min_evidence_score = 0.2;
+  // (it drops most of the false poses that the rules let through); one that fails a rule is still
+  // accepted at accept_evidence_score (true poses whose matched lines include a shadow or grain line
+  // beside an edge). On renders the weights never saw (seeds 9-11), against the rules alone: 438 -> 454
+  // of 555 blocks found, false positives 15 -> 14 in 180 images (docs/benchmarks.md).
+  double min_evidence_score = 0.3;
   double accept_evidence_score = 0.8;
   double work_area_radius_m = 0.6;           // poses farther than this from the world origin (in x, y) are culled, m
   double below_table_tolerance_m = 0.010;    // poses whose box reaches deeper under z = 0 are culled, m (a raw
