@@ -14,7 +14,7 @@
 // evidence at the true pose, and each false detection); TEACHSIM_RECOGNIZE_NO_PEER=1 leaves LINE-MOD
 // out (for quick runs while working on the recognizer); TEACHSIM_RECOGNIZE_ABLATION runs the
 // recognizer with one option changed (see below: no-support, plane-only, index-N, contrast-X, score-X, evidence-X, accept-X,
-// rules-only, below-MM). For teachsim, every scored object is put down
+// rules-only, below-MM, support-N). For teachsim, every scored object is put down
 // to the stage that lost it (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
 
@@ -437,6 +437,7 @@ int Run(const BenchArgs& args) {
     // The evidence score's two thresholds; rules-only is the verification before the score.
     if (a.rfind("evidence-", 0) == 0) recognizer_options.min_evidence_score = std::atof(a.c_str() + 9);
     if (a.rfind("accept-", 0) == 0) recognizer_options.accept_evidence_score = std::atof(a.c_str() + 7);
+    if (a.rfind("support-", 0) == 0) recognizer_options.max_support_hypotheses = std::atoi(a.c_str() + 8);
     if (a.rfind("below-", 0) == 0) recognizer_options.below_table_tolerance_m = std::atof(a.c_str() + 6) * 1e-3;
     if (a == "rules-only") recognizer_options.min_evidence_score = 0, recognizer_options.accept_evidence_score = 1;
   }
