@@ -12,10 +12,13 @@
 // TEACHSIM_RECOGNIZE_DEBUG=1 prints every LINE-MOD match beside the truth (and, for the recognizer,
 // each image's stage counts and times, each object it missed with the stage that lost it and the
 // evidence at the true pose, and each false detection); TEACHSIM_RECOGNIZE_NO_PEER=1 leaves LINE-MOD
-// out (for quick runs while working on the recognizer); TEACHSIM_RECOGNIZE_ABLATION runs the
-// recognizer with one option changed (see below: no-support, plane-only, index-N, contrast-X, score-X, evidence-X, accept-X,
-// rules-only, below-MM, support-N). For teachsim, every scored object is put down
-// to the stage that lost it (vision::ClassifyLoss), per visible-fraction bin.
+// out (for quick runs while working on the recognizer); TEACHSIM_RECOGNIZE_RENDER_SEED=N another set
+// of random scenes; TEACHSIM_RECOGNIZE_FEATURES=FILE appends the evidence of every fitted hypothesis
+// with its truth label (see AppendFeatures; tools/fit_evidence_weights.py fits the evidence score to
+// it); TEACHSIM_RECOGNIZE_ABLATION runs the recognizer with one option changed (see below:
+// no-support, plane-only, index-N, contrast-X, score-X, evidence-X, accept-X, rules-only, below-MM,
+// support-N). For teachsim, every scored object is put down to the stage that lost it
+// (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
 
 #include <algorithm>
