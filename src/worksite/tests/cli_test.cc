@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
 #include <random>
 #include <sstream>
 
@@ -64,14 +65,18 @@ TEST(CliTest, CalibrateIntrinsicsFromRenderedViews) {
   CommandRun run = Teachsim("render --chessboard 9x6 --square 0.02 --scene " + kScene + " --views 15 --out " +
                             dir + "/views");
   ASSERT_EQ(run.status, 0) << run.err;
-  // An unreadable file and a view without a board among them: named and skipped.
+  // An unreadable file, a view without a board and an image of another size among them: named and skipped.
   std::ofstream(dir + "/views/broken.png") << "not a png";
   ASSERT_EQ(Teachsim("render --scene " + kScene + " --out " + dir + "/views/scene.png").status, 0);
+  ASSERT_TRUE(cv::imwrite(dir + "/views/zz_small.png", cv::Mat(240, 320, CV_8U, cv::Scalar(128))));
   run = Teachsim("calibrate intrinsics --images " + dir + "/views --board 9x6 --square 0.02 --out " + dir +
                  "/camera.json --name main");
   ASSERT_EQ(run.status, 0) << run.err;
   EXPECT_NE(run.err.find("broken.png: cannot read"), std::string::npos) << run.err;
   EXPECT_NE(run.err.find("scene.png: chessboard 9x6 (inner corners) not found"), std::string::npos)
+      << run.err;
+  EXPECT_NE(run.err.find("zz_small.png: size 320x240 differs from the first image's 640x480"),
+            std::string::npos)
       << run.err;
   EXPECT_NE(run.out.find("reprojection RMS"), std::string::npos);
   auto camera = scene::LoadCamera(dir + "/camera.json");
