@@ -184,7 +184,8 @@ TEST(CliTest, CalibrateExtrinsicsSnapAndEdgeFitFromHalfPixelClicks) {
   }
 
   CommandRun run = Teachsim("calibrate extrinsics --camera " + dir + "/camera.json --image " + dir +
-                            "/image.png --points " + dir + "/bare.json --snap --edge-fit --out " + dir + "/none.json");
+                            "/image.png --points " + dir + "/bare.json --snap --edge-fit --out " + dir +
+                            "/none.json");
   EXPECT_EQ(run.status, 2);
   EXPECT_NE(run.err.find("no point has edges"), std::string::npos) << run.err;
   EXPECT_NE(run.err.find("bare.json"), std::string::npos) << run.err;
