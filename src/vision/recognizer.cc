@@ -74,8 +74,9 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(fraction("min_evidence_score", min_evidence_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("accept_evidence_score", accept_evidence_score));
   if (accept_evidence_score < min_evidence_score) {
-    return Status::InvalidInput("RecognizerOptions::accept_evidence_score = " + json::FormatNumber(accept_evidence_score) +
-                                " must be >= min_evidence_score = " + json::FormatNumber(min_evidence_score));
+    return Status::InvalidInput(
+        "RecognizerOptions::accept_evidence_score = " + json::FormatNumber(accept_evidence_score) +
+        " must be >= min_evidence_score = " + json::FormatNumber(min_evidence_score));
   }
   TEACHSIM_RETURN_IF_ERROR(positive("work_area_radius_m", work_area_radius_m));
   TEACHSIM_RETURN_IF_ERROR(positive("support_tolerance_m", support_tolerance_m));
@@ -611,17 +612,17 @@ int HiddenSupportedSamples(const Model& behind_model, const geometry::Pose3& cam
 // edge support sample by sample along the visible predicted edges, leaving out the samples that
 // run along the fixed world's edges.
 PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                             const LineDetection& detection, const FixedEdgeMap* fixed, const RecognizerOptions& options,
-                             const EdgeMatchSet& set) {
+                             const LineDetection& detection, const FixedEdgeMap* fixed,
+                             const RecognizerOptions& options, const EdgeMatchSet& set) {
   const Eigen::Matrix3d K = camera.K();
   PoseEvidence out;
   out.matched_fraction = set.matched_fraction;
   out.matches = static_cast<int>(set.matches.size());
   if (!set.matches.empty()) {
     out.rms_px = FitPoseToLines(model.box_size_m, K, camera_T_object, set.matches, 0, 0).rms_px;
-    out.rms_closest_px =
-        FitPoseToLines(model.box_size_m, K, camera_T_object, ClosestMatchesPerEdge(model, K, camera_T_object, set.matches), 0, 0)
-            .rms_px;
+    out.rms_closest_px = FitPoseToLines(model.box_size_m, K, camera_T_object,
+                                        ClosestMatchesPerEdge(model, K, camera_T_object, set.matches), 0, 0)
+                             .rms_px;
   }
   constexpr double kContrastOffsetPx = 2.5;
   struct PerEdge {
@@ -630,35 +631,37 @@ PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geo
   };
   std::array<PerEdge, 12> per_edge{};
   int samples = 0, on_fixed = 0, supported = 0, informative = 0, free_supported = 0, free_informative = 0;
-  ForEachOutlineSample(model.box_size_m, camera_T_object, camera,
-                       [&](const Eigen::Vector3d&, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int e) {
-                         PerEdge& pe = per_edge[static_cast<size_t>(e)];
-                         ++samples;
-                         ++pe.samples;
-                         const int sign = SignedEdgeAcross(detection.edge_map, c, normal);
-                         const bool contrast =
-                             sign != 0 || std::abs(SampleGrey(detection.edge_map.smoothed, c + kContrastOffsetPx * normal) -
-                                                   SampleGrey(detection.edge_map.smoothed, c - kContrastOffsetPx * normal)) >=
-                                              options.min_edge_contrast;
-                         supported += sign != 0 ? 1 : 0;
-                         informative += contrast ? 1 : 0;
-                         if (fixed != nullptr && OnFixedEdge(*fixed, c, normal)) {
-                           ++on_fixed;
-                           return;
-                         }
-                         ++pe.free;
-                         if (sign != 0) {
-                           ++pe.supported;
-                           (sign > 0 ? pe.plus : pe.minus) += 1;
-                           ++free_supported;
-                         }
-                         free_informative += contrast ? 1 : 0;
-                       });
+  ForEachOutlineSample(
+      model.box_size_m, camera_T_object, camera,
+      [&](const Eigen::Vector3d&, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int e) {
+        PerEdge& pe = per_edge[static_cast<size_t>(e)];
+        ++samples;
+        ++pe.samples;
+        const int sign = SignedEdgeAcross(detection.edge_map, c, normal);
+        const bool contrast =
+            sign != 0 || std::abs(SampleGrey(detection.edge_map.smoothed, c + kContrastOffsetPx * normal) -
+                                  SampleGrey(detection.edge_map.smoothed, c - kContrastOffsetPx * normal)) >=
+                             options.min_edge_contrast;
+        supported += sign != 0 ? 1 : 0;
+        informative += contrast ? 1 : 0;
+        if (fixed != nullptr && OnFixedEdge(*fixed, c, normal)) {
+          ++on_fixed;
+          return;
+        }
+        ++pe.free;
+        if (sign != 0) {
+          ++pe.supported;
+          (sign > 0 ? pe.plus : pe.minus) += 1;
+          ++free_supported;
+        }
+        free_informative += contrast ? 1 : 0;
+      });
   out.support_fraction = informative > 0 ? static_cast<double>(supported) / informative : 0;
   out.coverage = samples > 0 ? static_cast<double>(supported) / samples : 0;
   out.supported_px = supported * kOutlineSpacingPx;
   out.fixed_share = samples > 0 ? static_cast<double>(on_fixed) / samples : 0;
-  out.free_support_fraction = free_informative > 0 ? static_cast<double>(free_supported) / free_informative : 0;
+  out.free_support_fraction =
+      free_informative > 0 ? static_cast<double>(free_supported) / free_informative : 0;
   out.free_coverage = samples > 0 ? static_cast<double>(free_supported) / samples : 0;
   out.free_supported_px = free_supported * kOutlineSpacingPx;
   int majority = 0, signed_total = 0;
@@ -815,8 +818,8 @@ FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& ca
             double angle = std::atan2((*q - *prev).y(), (*q - *prev).x());
             if (angle < 0) angle += M_PI;
             if (angle >= M_PI) angle -= M_PI;
-            cv::line(out.direction, cv::Point2d(prev->x(), prev->y()), cv::Point2d(q->x(), q->y()), cv::Scalar(angle),
-                     static_cast<int>(2 * kHalfWidthPx + 1), cv::LINE_8);
+            cv::line(out.direction, cv::Point2d(prev->x(), prev->y()), cv::Point2d(q->x(), q->y()),
+                     cv::Scalar(angle), static_cast<int>(2 * kHalfWidthPx + 1), cv::LINE_8);
           }
           prev = q;
         }
@@ -828,7 +831,8 @@ FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& ca
 
 bool OnFixedEdge(const FixedEdgeMap& fixed, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
   const int x = static_cast<int>(std::lround(pixel.x())), y = static_cast<int>(std::lround(pixel.y()));
-  if (fixed.direction.empty() || x < 0 || y < 0 || x >= fixed.direction.cols || y >= fixed.direction.rows) return false;
+  if (fixed.direction.empty() || x < 0 || y < 0 || x >= fixed.direction.cols || y >= fixed.direction.rows)
+    return false;
   const float a = fixed.direction.at<float>(y, x);
   if (a > 4) return false;
   // The fixed edge's direction against the predicted edge's (the normal turned by 90 deg).
@@ -836,7 +840,8 @@ bool OnFixedEdge(const FixedEdgeMap& fixed, const Eigen::Vector2d& pixel, const 
 }
 
 PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                          const LineDetection& detection, const RecognizerOptions& options, const FixedEdgeMap* fixed) {
+                          const LineDetection& detection, const RecognizerOptions& options,
+                          const FixedEdgeMap* fixed) {
   const EdgeMatchSet set = MatchEdges(model, camera.K(), camera_T_object, detection.lines, options.match_distance_px,
                                       options.match_angle_deg * M_PI / 180);
   return ComputeEvidence(model, camera, camera_T_object, detection, fixed, options, set);
@@ -848,9 +853,10 @@ double EvidenceScore(const PoseEvidence& e) {
   // that a pose is as wrong as it gets, and a stray far line should not outweigh the rest.
   constexpr double kIntercept = -2.2347;
   const double edges_supported_fraction = e.edges_supported / std::max(e.edges_visible, 1.0);
-  const double z = kIntercept + 6.8563 * e.matched_fraction - 4.0041 * e.support_fraction + 2.9860 * e.coverage -
-                   0.9108 * std::min(e.rms_px, 4.0) - 1.2449 * std::min(e.rms_closest_px, 4.0) -
-                   0.8988 * e.continued_ends + 0.5762 * e.long_continued_ends - 3.7774 * e.fixed_share -
+  const double z = kIntercept + 6.8563 * e.matched_fraction - 4.0041 * e.support_fraction +
+                   2.9860 * e.coverage - 0.9108 * std::min(e.rms_px, 4.0) -
+                   1.2449 * std::min(e.rms_closest_px, 4.0) - 0.8988 * e.continued_ends +
+                   0.5762 * e.long_continued_ends - 3.7774 * e.fixed_share -
                    3.7323 * e.free_support_fraction + 5.8348 * e.free_coverage + 1.1887 * e.polarity -
                    0.4480 * edges_supported_fraction - 0.4147 * e.edges_visible + 1.2771 * e.edges_supported;
   return 1 / (1 + std::exp(-z));
@@ -1094,7 +1100,8 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     }
     // Culling (§7.1): outside the work site, under the table, inside a fixed object.
     const geometry::Pose3 world_T_object = world_T_camera * fit.camera_T_object;
-    if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m) return reject(Outcome::kImplausible);
+    if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m)
+      return reject(Outcome::kImplausible);
     double zmin = 1e9;
     for (const Eigen::Vector3d& v : BoxWorldVertices(model, world_T_object)) zmin = std::min(zmin, v.z());
     if (zmin < table_top_z - options_.below_table_tolerance_m) return reject(Outcome::kImplausible);
@@ -1121,13 +1128,15 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
                (trimmed_rms && (evidence.matched_fraction < kTrimmedMinMatchedFraction ||
                                 evidence.coverage < kTrimmedMinCoverage ||
                                 evidence.continued_ends > kTrimmedMaxContinuedEnds)) ||
-               (evidence.long_continued_ends >= kPartMinContinuedEnds && evidence.coverage < kPartMaxCoverage)) {
+               (evidence.long_continued_ends >= kPartMinContinuedEnds &&
+                evidence.coverage < kPartMaxCoverage)) {
       rule = Outcome::kSupport;
     }
     // The evidence score over all of it (EvidenceScore): required of a pose that passes the rules,
     // and enough on its own when it is high.
     const double score = EvidenceScore(evidence);
-    if (rule == Outcome::kCandidate ? score < options_.min_evidence_score : score < options_.accept_evidence_score) {
+    if (rule == Outcome::kCandidate ? score < options_.min_evidence_score
+                                    : score < options_.accept_evidence_score) {
       reject(rule == Outcome::kCandidate ? Outcome::kEvidence : rule);
       return;
     }

@@ -455,7 +455,8 @@ TEST(VerificationTest, TheEvidenceScoreSeparatesTheTruePoseFromWrongOnes) {
   const RecognizerOptions options;
   const LineDetection detection = DetectLinesAndEdges(image, camera, options);
   auto score = [&](const Model& model, const geometry::Pose3& world_T_object) {
-    return EvidenceScore(EvaluatePose(model, camera, camera.camera_T_world() * world_T_object, detection, options));
+    return EvidenceScore(
+        EvaluatePose(model, camera, camera.camera_T_world() * world_T_object, detection, options));
   };
   const double truth = score(Bar(), bar);
   EXPECT_GE(truth, options.accept_evidence_score);
@@ -466,8 +467,8 @@ TEST(VerificationTest, TheEvidenceScoreSeparatesTheTruePoseFromWrongOnes) {
   const geometry::Pose3 turned = OnTable(Bar().box_size_m, 0.02, -0.01, 0.4 + M_PI / 2);
   const double crossing = score(Bar(), turned);
   EXPECT_LT(crossing, options.min_evidence_score);
-  std::printf("evidence score: true pose %.3f, moved by a quarter of its length %.3f, turned 90 deg %.3f\n", truth,
-              moved, crossing);
+  std::printf("evidence score: true pose %.3f, moved by a quarter of its length %.3f, turned 90 deg %.3f\n",
+              truth, moved, crossing);
 }
 
 // The fixed world's edges, projected: a predicted edge along one of them is explained already; one
@@ -493,8 +494,10 @@ TEST(VerificationTest, FixedEdgesAreFoundAlongTheProjectedFrame) {
     if (!pa || !pb || !camera->InImage(*pa) || !camera->InImage(*pb)) continue;
     const Eigen::Vector2d mid = 0.5 * (*pa + *pb), along = (*pb - *pa).normalized();
     const Eigen::Vector2d normal(-along.y(), along.x());
-    EXPECT_TRUE(OnFixedEdge(fixed, mid, normal)) << mid.transpose() << ": " << fixed.direction.at<float>(
-        static_cast<int>(std::lround(mid.y())), static_cast<int>(std::lround(mid.x())));
+    EXPECT_TRUE(OnFixedEdge(fixed, mid, normal))
+        << mid.transpose() << ": "
+        << fixed.direction.at<float>(static_cast<int>(std::lround(mid.y())),
+                                     static_cast<int>(std::lround(mid.x())));
     EXPECT_FALSE(OnFixedEdge(fixed, mid, along));  // a predicted edge across the fixed one
     EXPECT_FALSE(OnFixedEdge(fixed, mid + 12 * normal, normal));
     ++checked;

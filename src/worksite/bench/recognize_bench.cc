@@ -28,14 +28,13 @@
 #include <cstdlib>
 #include <filesystem>
 #include <map>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <optional>
 #include <random>
 #include <string>
 #include <vector>
-
-#include <opencv2/core/utility.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "linemod_peer.h"
 #include "teachsim/base/bench_registry.h"
@@ -296,8 +295,8 @@ std::optional<vision::FitResult> RefineWithFit(const Eigen::Vector3d& size, cons
 // TEACHSIM_RECOGNIZE_DUMP=DIR: each image with a missed block or a false detection, as DIR/NAME.png
 // with the truth's visible edges (green), found recognitions (blue) and false ones (red).
 void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camera,
-              const std::map<std::string, Eigen::Vector3d>& sizes, const std::vector<vision::Recognition>& objects,
-              const vision::ImageEvaluation& evaluation) {
+              const std::map<std::string, Eigen::Vector3d>& sizes,
+              const std::vector<vision::Recognition>& objects, const vision::ImageEvaluation& evaluation) {
   bool interesting = evaluation.false_positives > 0;
   for (const vision::ObjectOutcome& o : evaluation.objects) interesting = interesting || o.detection < 0;
   if (!interesting) return;
@@ -309,12 +308,16 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
     const std::uint16_t visible = vision::VisibleBoxEdges(size, camera_T_object.Inverse().translation);
     for (int e = 0; e < 12; ++e) {
       if ((visible >> e & 1) == 0) continue;
-      const Eigen::Vector3d a = camera_T_object * vision::BoxVertex(size, vision::kBoxEdges[static_cast<std::size_t>(e)][0]);
-      const Eigen::Vector3d b = camera_T_object * vision::BoxVertex(size, vision::kBoxEdges[static_cast<std::size_t>(e)][1]);
+      const Eigen::Vector3d a =
+          camera_T_object * vision::BoxVertex(size, vision::kBoxEdges[static_cast<std::size_t>(e)][0]);
+      const Eigen::Vector3d b =
+          camera_T_object * vision::BoxVertex(size, vision::kBoxEdges[static_cast<std::size_t>(e)][1]);
       std::optional<Eigen::Vector2d> prev;
       for (int i = 0; i <= 10; ++i) {
         const auto p = camera.ProjectFromCamera(a + (b - a) * (i / 10.0));
-        if (p && prev) cv::line(out, cv::Point2d(prev->x(), prev->y()), cv::Point2d(p->x(), p->y()), colour, 1, cv::LINE_AA);
+        if (p && prev)
+          cv::line(out, cv::Point2d(prev->x(), prev->y()), cv::Point2d(p->x(), p->y()), colour, 1,
+                   cv::LINE_AA);
         prev = p;
       }
     }
@@ -324,21 +327,32 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
     const bool fp = evaluation.detection_truth[d] == -1;
     draw(objects[d].model, objects[d].world_T_object, fp ? cv::Scalar(0, 0, 255) : cv::Scalar(255, 128, 0));
     auto p = camera.Project(objects[d].world_T_object.translation);
-    if (p && fp) cv::putText(out, objects[d].model, cv::Point2d(p->x(), p->y()), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(0, 0, 255));
+    if (p && fp)
+      cv::putText(out, objects[d].model, cv::Point2d(p->x(), p->y()), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+                  cv::Scalar(0, 0, 255));
   }
-  cv::imwrite(dir + "/" + c.name + (c.name.size() > 4 && c.name.substr(c.name.size() - 4) == ".png" ? "" : ".png"), out);
+  cv::imwrite(
+      dir + "/" + c.name + (c.name.size() > 4 && c.name.substr(c.name.size() - 4) == ".png" ? "" : ".png"),
+      out);
 }
 
 const char* OutcomeName(vision::RecognitionTrace::Outcome outcome) {
   using Outcome = vision::RecognitionTrace::Outcome;
   switch (outcome) {
-    case Outcome::kFitFailed: return "fit_failed";
-    case Outcome::kMatchedFraction: return "matched_fraction";
-    case Outcome::kReprojection: return "reprojection";
-    case Outcome::kSupport: return "support";
-    case Outcome::kEvidence: return "evidence";
-    case Outcome::kImplausible: return "implausible";
-    case Outcome::kCandidate: return "candidate";
+    case Outcome::kFitFailed:
+      return "fit_failed";
+    case Outcome::kMatchedFraction:
+      return "matched_fraction";
+    case Outcome::kReprojection:
+      return "reprojection";
+    case Outcome::kSupport:
+      return "support";
+    case Outcome::kEvidence:
+      return "evidence";
+    case Outcome::kImplausible:
+      return "implausible";
+    case Outcome::kCandidate:
+      return "candidate";
   }
   return "?";
 }
@@ -347,10 +361,10 @@ const char* OutcomeName(vision::RecognitionTrace::Outcome outcome) {
 // evidence at its fitted pose (vision::EvaluatePose) and whether it lies on a true block of its
 // model (mean distance of the projected vertices to the truth's nearest ones < 3 px): the data for
 // choosing the verification rule.
-void AppendFeatures(const std::string& path, const std::string& set_name, const Case& c, const vision::Camera& camera,
-                    const vision::ModelLibrary& library, const vision::LineDetection& detection,
-                    const vision::FixedEdgeMap& fixed, const vision::RecognizerOptions& options,
-                    const vision::RecognitionTrace& trace) {
+void AppendFeatures(const std::string& path, const std::string& set_name, const Case& c,
+                    const vision::Camera& camera, const vision::ModelLibrary& library,
+                    const vision::LineDetection& detection, const vision::FixedEdgeMap& fixed,
+                    const vision::RecognizerOptions& options, const vision::RecognitionTrace& trace) {
   std::FILE* f = std::fopen(path.c_str(), "a");
   if (f == nullptr) return;
   const Eigen::Matrix3d K = camera.K();
@@ -381,15 +395,17 @@ void AppendFeatures(const std::string& path, const std::string& set_name, const 
       }
       if (sum / 8 < best) best = sum / 8, visible = t.visible_fraction;
     }
-    const vision::PoseEvidence e = vision::EvaluatePose(model, camera, fitted.camera_T_object, detection, options, &fixed);
-    std::fprintf(f,
-                 "%s\t%s\t%s\t%d\t%s\t%d\t%.2f\t%.3f\t%.4f\t%.4f\t%.4f\t%.1f\t%.3f\t%.3f\t%d\t%d\t%d\t%.4f\t%.4f\t%.4f"
-                 "\t%.1f\t%.4f\t%.0f\t%.0f\t%.4f\n",
-                 set_name.c_str(), c.name.c_str(), model.name.c_str(), fitted.group_kind, OutcomeName(fitted.outcome),
-                 fitted.accepted ? 1 : 0, best, visible, e.matched_fraction, e.support_fraction, e.coverage,
-                 e.supported_px, e.rms_px, e.rms_closest_px, e.matches, e.continued_ends, e.long_continued_ends,
-                 e.fixed_share, e.free_support_fraction, e.free_coverage, e.free_supported_px, e.polarity,
-                 e.edges_supported, e.edges_visible, vision::EvidenceScore(e));
+    const vision::PoseEvidence e =
+        vision::EvaluatePose(model, camera, fitted.camera_T_object, detection, options, &fixed);
+    std::fprintf(
+        f,
+        "%s\t%s\t%s\t%d\t%s\t%d\t%.2f\t%.3f\t%.4f\t%.4f\t%.4f\t%.1f\t%.3f\t%.3f\t%d\t%d\t%d\t%.4f\t%.4f\t%.4f"
+        "\t%.1f\t%.4f\t%.0f\t%.0f\t%.4f\n",
+        set_name.c_str(), c.name.c_str(), model.name.c_str(), fitted.group_kind, OutcomeName(fitted.outcome),
+        fitted.accepted ? 1 : 0, best, visible, e.matched_fraction, e.support_fraction, e.coverage,
+        e.supported_px, e.rms_px, e.rms_closest_px, e.matches, e.continued_ends, e.long_continued_ends,
+        e.fixed_share, e.free_support_fraction, e.free_coverage, e.free_supported_px, e.polarity,
+        e.edges_supported, e.edges_visible, vision::EvidenceScore(e));
   }
   std::fclose(f);
 }
@@ -441,8 +457,10 @@ int Run(const BenchArgs& args) {
     if (a.rfind("evidence-", 0) == 0) recognizer_options.min_evidence_score = std::atof(a.c_str() + 9);
     if (a.rfind("accept-", 0) == 0) recognizer_options.accept_evidence_score = std::atof(a.c_str() + 7);
     if (a.rfind("support-", 0) == 0) recognizer_options.max_support_hypotheses = std::atoi(a.c_str() + 8);
-    if (a.rfind("below-", 0) == 0) recognizer_options.below_table_tolerance_m = std::atof(a.c_str() + 6) * 1e-3;
-    if (a == "rules-only") recognizer_options.min_evidence_score = 0, recognizer_options.accept_evidence_score = 1;
+    if (a.rfind("below-", 0) == 0)
+      recognizer_options.below_table_tolerance_m = std::atof(a.c_str() + 6) * 1e-3;
+    if (a == "rules-only")
+      recognizer_options.min_evidence_score = 0, recognizer_options.accept_evidence_score = 1;
   }
   auto recognizer = vision::Recognizer::Create(library, recognizer_options, cache_dir);
   const double recognizer_setup_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -535,10 +553,12 @@ int Run(const BenchArgs& args) {
           }
         }
         if (const char* features = std::getenv("TEACHSIM_RECOGNIZE_FEATURES"); features != nullptr) {
-          AppendFeatures(features, sets[s].description.find("seed") != std::string::npos ? "render" : "dev", c, *camera,
-                         library, detection, vision::ProjectFixedEdges(&fixed_world, *camera), recognizer->options(), trace);
+          AppendFeatures(features, sets[s].description.find("seed") != std::string::npos ? "render" : "dev",
+                         c, *camera, library, detection, vision::ProjectFixedEdges(&fixed_world, *camera),
+                         recognizer->options(), trace);
         }
-        if (const char* dump_dir = std::getenv("TEACHSIM_RECOGNIZE_DUMP"); evaluation.ok() && dump_dir != nullptr) {
+        if (const char* dump_dir = std::getenv("TEACHSIM_RECOGNIZE_DUMP");
+            evaluation.ok() && dump_dir != nullptr) {
           DumpCase(dump_dir, c, *camera, truth->model_sizes_m, recognized->objects, *evaluation);
         }
         for (std::size_t i = 0; i < c.truth.size(); ++i) {

@@ -86,7 +86,8 @@ double ShareBelow(const std::vector<double>& v, double limit) {
 
 void Print(const char* label, const Summary& s) {
   std::printf("%-34s trials %4zu  ", label, s.position_error_mm.size());
-  if (!s.snap_error_px.empty()) {  // rows without snapping (or whose snaps are not measured) say nothing of it
+  if (!s.snap_error_px
+           .empty()) {  // rows without snapping (or whose snaps are not measured) say nothing of it
     std::printf("snap error px median %.3f p95 %.3f (unsnapped %d of %d)  ", Quantile(s.snap_error_px, 0.5),
                 Quantile(s.snap_error_px, 0.95), s.unsnapped, s.points);
   }

@@ -180,12 +180,13 @@ TEST(CliTest, CalibrateExtrinsicsSnapAndEdgeFitFromHalfPixelClicks) {
     auto solved = scene::LoadCamera(out);
     ASSERT_TRUE(solved.ok());
     EXPECT_LT((solved->world_T_camera.translation - truth.world_T_camera.translation).norm(), 2e-3)
-        << "trial " << trial << "\n" << run.out;
+        << "trial " << trial << "\n"
+        << run.out;
   }
 
-  CommandRun run = Teachsim("calibrate extrinsics --camera " + dir + "/camera.json --image " + dir +
-                            "/image.png --points " + dir + "/bare.json --snap --edge-fit --out " + dir +
-                            "/none.json");
+  CommandRun run =
+      Teachsim("calibrate extrinsics --camera " + dir + "/camera.json --image " + dir +
+               "/image.png --points " + dir + "/bare.json --snap --edge-fit --out " + dir + "/none.json");
   EXPECT_EQ(run.status, 2);
   EXPECT_NE(run.err.find("no point has edges"), std::string::npos) << run.err;
   EXPECT_NE(run.err.find("bare.json"), std::string::npos) << run.err;
