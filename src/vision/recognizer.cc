@@ -460,16 +460,6 @@ struct Hypothesis {
   int entry = 0;
 };
 
-// Edge support along the predicted outline and inner edges, in the distorted image: a sample point
-// is supported by a Canny edge within 2 px across the edge whose gradient is across the edge. Where
-// the image shows no contrast across the predicted edge (a lit face against the lit table) no edge
-// can be expected: such samples are uninformative and left out of `fraction` (but not `coverage`).
-// A candidate's edge support (from its PoseEvidence), for the ranking below.
-struct Support {
-  double fraction = 0;      // supported / informative samples
-  double coverage = 0;      // supported / all samples
-  double supported_px = 0;  // supported length
-};
 float SampleGrey(const cv::Mat& m, const Eigen::Vector2d& p) {
   const double x = std::clamp(p.x(), 0.0, m.cols - 1.001), y = std::clamp(p.y(), 0.0, m.rows - 1.001);
   const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
@@ -509,7 +499,7 @@ void ForEachOutlineSample(const Eigen::Vector3d& box_size_m, const geometry::Pos
 // outline where the image shows nothing (an upright slab over a cube and the table) comes first. By
 // supported length times support fraction, the benchmark's demo (cornering, seed 7) lost the cube to
 // such a slab.
-double NetSupportPx(const Support& s) { return s.supported_px * (2 - 1 / std::max(s.coverage, 1e-3)); }
+double NetSupportPx(const PoseEvidence& e) { return e.supported_px * (2 - 1 / std::max(e.coverage, 1e-3)); }
 
 // Image edges that run on past the ends of the predicted edges: a block's visible edges end at its
 // corners, but a smaller wrong model fitted onto part of a real block (a cube on a bar) or onto the
@@ -575,7 +565,7 @@ std::vector<LineMatch> ClosestMatchesPerEdge(const Model& model, const Eigen::Ma
 }
 
 // Occlusion consistency: the samples of `behind`'s predicted edges that show an image edge (as in
-// EdgeSupport) but that `front`, were it there, would hide (the ray from the camera to the edge
+// the evidence's edge support) but that `front`, were it there, would hide (the ray from the camera to the edge
 // point passes through front's box, shrunk by kHideMarginM so that edges on front's own outline
 // and edges touching it do not count). A pose that would hide edges the image shows is wrong.
 int HiddenSupportedSamples(const Model& behind_model, const geometry::Pose3& camera_T_behind, const Model& front_model,
@@ -609,8 +599,11 @@ int HiddenSupportedSamples(const Model& behind_model, const geometry::Pose3& cam
 }
 
 // The evidence for a pose (what verification decides on): matched lines and their residuals, and
-// edge support sample by sample along the visible predicted edges, leaving out the samples that
-// run along the fixed world's edges.
+// edge support sample by sample along the visible predicted edges (distorted image): a sample is
+// supported by a Canny edge within 2 px across the edge whose gradient is across the edge. Where the
+// image shows no contrast across the predicted edge (a lit face against the lit table) no edge can be
+// expected: such samples are uninformative and left out of support_fraction (not of coverage). The
+// free_* fields leave out the samples that run along the fixed world's edges.
 PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                              const LineDetection& detection, const FixedEdgeMap* fixed,
                              const RecognizerOptions& options, const EdgeMatchSet& set) {
@@ -684,7 +677,7 @@ struct Candidate {
   geometry::Pose3 camera_T_object;
   FitResult fit;
   EdgeMatchSet matches;
-  Support support;
+  PoseEvidence evidence;
   double rms_px = 0;
 };
 
@@ -1140,10 +1133,6 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       reject(rule == Outcome::kCandidate ? Outcome::kEvidence : rule);
       return;
     }
-    Support support;
-    support.fraction = evidence.support_fraction;
-    support.coverage = evidence.coverage;
-    support.supported_px = evidence.supported_px;
     reject(Outcome::kCandidate);
     Candidate c;
     c.trace_index = traced != nullptr ? static_cast<int>(trace->fitted.size()) - 1 : -1;
@@ -1151,7 +1140,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     c.camera_T_object = fit.camera_T_object;
     c.fit = fit;
     c.matches = set;
-    c.support = support;
+    c.evidence = evidence;
     c.rms_px = fit.rms_px;
     for (int seg : set.segments) claimed[static_cast<size_t>(seg)] = true;
     candidates.push_back(std::move(c));
@@ -1306,7 +1295,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
   order = supported_subset(order);
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
-    return NetSupportPx(candidates[a].support) > NetSupportPx(candidates[b].support);
+    return NetSupportPx(candidates[a].evidence) > NetSupportPx(candidates[b].evidence);
   });
   std::vector<size_t> accepted;
   for (size_t i : order) {
@@ -1344,7 +1333,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     r.model = model.name;
     r.raw_world_T_object = world_T_camera * c.camera_T_object;
     r.world_T_object = r.raw_world_T_object;
-    r.score = c.support.fraction;
+    r.score = c.evidence.support_fraction;
     r.matched_edge_fraction = c.matches.matched_fraction;
     r.reprojection_rms_px = c.rms_px;
     Eigen::Matrix<double, 6, 6> b = Eigen::Matrix<double, 6, 6>::Zero();
