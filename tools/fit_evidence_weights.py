@@ -35,14 +35,21 @@ def features(row):
 
 def load(path, which):
     rows = []
-    with open(path) as f:
+    try:
+        f = open(path)
+    except OSError as e:
+        sys.exit(f"{path}: cannot read: {e.strerror}")
+    with f:
         for number, line in enumerate(f, 1):
             fields = line.rstrip("\n").split("\t")
             if len(fields) != len(COLUMNS):
                 sys.exit(f"{path}:{number}: {len(fields)} fields, expected {len(COLUMNS)}")
             row = dict(zip(COLUMNS, fields))
             for key in NUMERIC:
-                row[key] = float(row[key])
+                try:
+                    row[key] = float(row[key])
+                except ValueError:
+                    sys.exit(f"{path}:{number}: column '{key}' is '{row[key]}', not a number")
             if which != "all" and row["set"] != which:
                 continue
             if row["outcome"] == OUTCOME_IMPLAUSIBLE:
@@ -108,6 +115,8 @@ def main():
     parser.add_argument("held_out", nargs="*")
     args = parser.parse_args()
     rows = load(args.train, args.set)
+    if not rows or all(r["best"] >= 3 for r in rows) or all(r["best"] < 3 for r in rows):
+        sys.exit(f"{args.train}: no rows of set '{args.set}' with both true and false hypotheses to fit")
     xs = [features(r) for r in rows]
     ys = [1 if r["best"] < 3 else -1 for r in rows]
     print(f"fitting on {len(rows)} hypotheses ({sum(y > 0 for y in ys)} true) of {args.train} [{args.set}]")

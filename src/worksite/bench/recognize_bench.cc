@@ -27,6 +27,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -410,6 +411,42 @@ void AppendFeatures(const std::string& path, const std::string& set_name, const 
   std::fclose(f);
 }
 
+// TEACHSIM_RECOGNIZE_ABLATION: the recognizer with one option changed. "no-support" (the index
+// alone), "plane-only" (support hypotheses fitted on their plane without the 6-DOF refinement),
+// "rules-only" (verification without the evidence score), or NAME-VALUE: index-N (at most N index
+// hypotheses), support-N (at most N support hypotheses), contrast-X (min_edge_contrast), score-X
+// (min_score), evidence-X (min_evidence_score), accept-X (accept_evidence_score), below-MM (culling
+// depth under the table, mm). What is wrong with the value, or nothing.
+std::optional<std::string> ApplyAblation(const std::string& a, vision::RecognizerOptions* o) {
+  if (a == "no-support") return o->support_hypotheses = false, std::nullopt;
+  if (a == "plane-only") return o->support_refine_6dof = false, std::nullopt;
+  if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
+  const std::size_t dash = a.rfind('-');
+  const std::string name = dash == std::string::npos ? a : a.substr(0, dash);
+  const std::string text = dash == std::string::npos ? "" : a.substr(dash + 1);
+  char* end = nullptr;
+  const double value = std::strtod(text.c_str(), &end);
+  const bool number = !text.empty() && end == text.c_str() + text.size() && std::isfinite(value);
+  const std::map<std::string, std::function<void(double)>> setters = {
+      {"index", [o](double v) { o->max_hypotheses = static_cast<int>(v); }},
+      {"support", [o](double v) { o->max_support_hypotheses = static_cast<int>(v); }},
+      {"contrast", [o](double v) { o->min_edge_contrast = v; }},
+      {"score", [o](double v) { o->min_score = v; }},
+      {"evidence", [o](double v) { o->min_evidence_score = v; }},
+      {"accept", [o](double v) { o->accept_evidence_score = v; }},
+      {"below", [o](double v) { o->below_table_tolerance_m = v * 1e-3; }},
+  };
+  const auto setter = setters.find(name);
+  if (setter == setters.end()) {
+    return "unknown ablation (no-support, plane-only, rules-only, index-N, support-N, contrast-X, score-X, "
+           "evidence-X, accept-X, below-MM)";
+  }
+  if (!number) return "'" + text + "' after '" + name + "-' is not a number";
+  setter->second(value);
+  if (Status s = o->Validate(); !s.ok()) return s.message();
+  return std::nullopt;
+}
+
 // --- Methods and the run -----------------------------------------------------------------------------
 
 const char* const kMethods[] = {"teachsim", "teachsim_raw_pose", "linemod", "linemod_fit"};
@@ -442,25 +479,12 @@ int Run(const BenchArgs& args) {
 
   // Set-up: the recognizer's index and the peer's templates (cached on disk).
   auto t0 = std::chrono::steady_clock::now();
-  // TEACHSIM_RECOGNIZE_ABLATION: "no-support" (the index alone), "plane-only" (support hypotheses
-  // fitted on their plane without the 6-DOF refinement), "index-N" (at most N index hypotheses),
-  // "contrast-X" (min_edge_contrast), "score-X" (min_score).
   vision::RecognizerOptions recognizer_options;
   if (const char* ablation = std::getenv("TEACHSIM_RECOGNIZE_ABLATION"); ablation != nullptr) {
-    const std::string a = ablation;
-    if (a == "no-support") recognizer_options.support_hypotheses = false;
-    if (a == "plane-only") recognizer_options.support_refine_6dof = false;
-    if (a.rfind("index-", 0) == 0) recognizer_options.max_hypotheses = std::atoi(a.c_str() + 6);
-    if (a.rfind("contrast-", 0) == 0) recognizer_options.min_edge_contrast = std::atof(a.c_str() + 9);
-    if (a.rfind("score-", 0) == 0) recognizer_options.min_score = std::atof(a.c_str() + 6);
-    // The evidence score's two thresholds; rules-only is the verification before the score.
-    if (a.rfind("evidence-", 0) == 0) recognizer_options.min_evidence_score = std::atof(a.c_str() + 9);
-    if (a.rfind("accept-", 0) == 0) recognizer_options.accept_evidence_score = std::atof(a.c_str() + 7);
-    if (a.rfind("support-", 0) == 0) recognizer_options.max_support_hypotheses = std::atoi(a.c_str() + 8);
-    if (a.rfind("below-", 0) == 0)
-      recognizer_options.below_table_tolerance_m = std::atof(a.c_str() + 6) * 1e-3;
-    if (a == "rules-only")
-      recognizer_options.min_evidence_score = 0, recognizer_options.accept_evidence_score = 1;
+    if (const std::optional<std::string> error = ApplyAblation(ablation, &recognizer_options)) {
+      std::fprintf(stderr, "teachsim: error: TEACHSIM_RECOGNIZE_ABLATION=%s: %s\n", ablation, error->c_str());
+      return 2;
+    }
   }
   auto recognizer = vision::Recognizer::Create(library, recognizer_options, cache_dir);
   const double recognizer_setup_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
