@@ -177,7 +177,8 @@ LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& came
   dx.convertTo(fdx, CV_32F);
   dy.convertTo(fdy, CV_32F);
   cv::magnitude(fdx, fdy, magnitude);
-  out.edge_map.direction = cv::Mat::zeros(image_gray8.size(), CV_32F);
+  out.edge_map.magnitude = magnitude;
+  out.edge_map.gradient = cv::Mat::zeros(image_gray8.size(), CV_32FC2);
 
   const Intrinsics& k = camera.intrinsics();
   const std::vector<std::vector<cv::Point>> chains = TraceChains(out.edge_map.edges);
@@ -188,15 +189,12 @@ LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& came
     for (const cv::Point& p : chain) {
       const float gx = fdx.at<float>(p), gy = fdy.at<float>(p);
       const float m0 = magnitude.at<float>(p);
-      out.edge_map.direction.at<float>(p) = std::atan2(gy, gx);
+      if (m0 > 0) out.edge_map.gradient.at<cv::Vec2f>(p) = cv::Vec2f(gx / m0, gy / m0);
       // Sub-pixel: the peak of a parabola through the gradient magnitude across the edge.
       Eigen::Vector2d pixel(p.x, p.y);
       if (m0 > 0) {
         const Eigen::Vector2d g(gx / m0, gy / m0);
-        const double mm = internal::SampleBilinear(magnitude, p.x - g.x(), p.y - g.y());
-        const double mp = internal::SampleBilinear(magnitude, p.x + g.x(), p.y + g.y());
-        const double denom = mm - 2.0 * m0 + mp;
-        if (denom < 0) pixel += g * std::clamp(0.5 * (mm - mp) / denom, -0.5, 0.5);
+        pixel += g * internal::SubPixelEdgeOffset(magnitude, p.x, p.y, g.x(), g.y());
       }
       ++out.edge_points;
       // Undistort (Newton, warm-started from the previous point of the chain).
@@ -219,15 +217,19 @@ std::vector<ImageLine> DetectLines(const cv::Mat& image_gray8, const Camera& cam
 }
 
 int SignedEdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
-  static const double cos_tol = std::cos(25 * M_PI / 180);
+  // The hottest loop of the recognizer (every support hypothesis and verified pose samples it): the
+  // nearest pixel by floor(v + 0.5), and the unit gradient stored per edge pixel (no trigonometry).
+  static const float cos_tol = static_cast<float>(std::cos(25 * M_PI / 180));
+  const int cols = edge_map.edges.cols, rows = edge_map.edges.rows;
+  const float nx = static_cast<float>(normal.x()), ny = static_cast<float>(normal.y());
   for (int o = 0; o <= 4; ++o) {
     const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
-    const int x = static_cast<int>(std::lround(pixel.x() + offset * normal.x()));
-    const int y = static_cast<int>(std::lround(pixel.y() + offset * normal.y()));
-    if (x < 0 || y < 0 || x >= edge_map.edges.cols || y >= edge_map.edges.rows) continue;
-    if (!edge_map.edges.at<uint8_t>(y, x)) continue;
-    const float a = edge_map.direction.at<float>(y, x);
-    const double c = std::cos(a) * normal.x() + std::sin(a) * normal.y();
+    const int x = static_cast<int>(std::floor(pixel.x() + offset * normal.x() + 0.5));
+    const int y = static_cast<int>(std::floor(pixel.y() + offset * normal.y() + 0.5));
+    if (x < 0 || y < 0 || x >= cols || y >= rows) continue;
+    if (!edge_map.edges.ptr<uint8_t>(y)[x]) continue;
+    const cv::Vec2f g = edge_map.gradient.ptr<cv::Vec2f>(y)[x];
+    const float c = g[0] * nx + g[1] * ny;
     if (std::abs(c) >= cos_tol) return c > 0 ? 1 : -1;
   }
   return 0;

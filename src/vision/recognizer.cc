@@ -1243,6 +1243,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     if (failed) continue;
     verify(entry.model, fit, traced);
   }
+
   const auto t4 = Clock::now();
 
   // Culling what floats (§7.1: poses that cannot be real): each recognition rests on the table, on
@@ -1332,10 +1333,10 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     Recognition r;
     r.model = model.name;
     r.raw_world_T_object = world_T_camera * c.camera_T_object;
-    r.world_T_object = r.raw_world_T_object;
     r.score = c.evidence.support_fraction;
     r.matched_edge_fraction = c.matches.matched_fraction;
     r.reprojection_rms_px = c.rms_px;
+    r.world_T_object = r.raw_world_T_object;
     Eigen::Matrix<double, 6, 6> b = Eigen::Matrix<double, 6, 6>::Zero();
     b.block<3, 3>(0, 0) = world_T_camera.RotationMatrix();
     b.block<3, 3>(3, 3) = world_T_camera.RotationMatrix();
@@ -1379,6 +1380,22 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       resting[k] = true;
       r.adjustments.push_back("rested on the table: moved " + Mm(move.norm()) +
                               (std::abs(ray.z()) > 0.1 ? " along the camera ray" : " vertically"));
+      // Fitted again where it now rests (x, y and yaw on the table) to the image's edge points
+      // along its outline (PolishPose): lines beside an edge no longer pull it.
+      if (options_.polish_pose) {
+        const PolishResult polished =
+            PolishPose(model, camera, camera.camera_T_world() * r.world_T_object, detection.edge_map, true);
+        if (polished.ok) {
+          const geometry::Pose3 before = r.world_T_object;
+          r.world_T_object = world_T_camera * polished.fit.camera_T_object;
+          r.reprojection_rms_px = polished.rms_px;
+          char buf[128];
+          std::snprintf(buf, sizeof(buf), "fitted on the table to %d edge points: moved %.2f mm, turned %.2f deg",
+                        polished.points, 1000 * (r.world_T_object.translation - before.translation).norm(),
+                        2 * std::asin(std::min(1.0, (r.world_T_object.rotation * before.rotation.conjugate()).vec().norm())) * 180 / M_PI);
+          r.adjustments.push_back(buf);
+        }
+      }
     }
   }
   // Interpenetrating recognitions: the less certain one moves by the smallest separating move

@@ -20,4 +20,14 @@ inline float SampleBilinear(const cv::Mat& m, double x, double y) {
                             fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]));
 }
 
+// The sub-pixel offset of an edge pixel along its unit gradient (gx, gy): the peak of a parabola
+// through the gradient magnitude at -1, 0, +1 along it, within half a pixel (0 when not a peak).
+inline double SubPixelEdgeOffset(const cv::Mat& magnitude, int x, int y, double gx, double gy) {
+  const double m0 = magnitude.ptr<float>(y)[x];
+  const double mm = SampleBilinear(magnitude, x - gx, y - gy);
+  const double mp = SampleBilinear(magnitude, x + gx, y + gy);
+  const double denom = mm - 2.0 * m0 + mp;
+  return denom < 0 ? std::clamp(0.5 * (mm - mp) / denom, -0.5, 0.5) : 0.0;
+}
+
 }  // namespace teachsim::vision::internal

@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <optional>
+#include <vector>
 
 #include "teachsim/vision/recognition_stages.h"
 
@@ -23,9 +24,10 @@ Eigen::Vector2d End(const ImageLine& l, int end) { return end == 0 ? l.a : l.b; 
 
 // Edge support before any fit: sample points along the visible predicted edges (projected with the
 // lens, straight between the projected vertices) with a Canny edge pixel within 2 px across whose
-// gradient is across the edge, over all sample points inside the image.
+// gradient is across the edge, over all sample points inside the image. 0 as soon as `min_score`
+// cannot be reached any more (most poses are wrong; the exact score of those is never used).
 double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const geometry::Pose3& camera_T_object,
-                    const EdgeMap& edge_map, double spacing_px) {
+                    const EdgeMap& edge_map, double spacing_px, double min_score) {
   const uint16_t visible = VisibleBoxEdges(size_m, camera_T_object.Inverse().translation);
   Eigen::Vector2d px[8];
   for (int i = 0; i < 8; ++i) {
@@ -33,7 +35,11 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
     if (!p) return 0;
     px[i] = *p;
   }
-  int samples = 0, supported = 0;
+  struct Sample {
+    Eigen::Vector2d at, normal;
+  };
+  thread_local std::vector<Sample> samples;
+  samples.clear();
   for (int e = 0; e < 12; ++e) {
     if (!(visible >> e & 1)) continue;
     const Eigen::Vector2d a = px[kBoxEdges[static_cast<size_t>(e)][0]], b = px[kBoxEdges[static_cast<size_t>(e)][1]];
@@ -43,12 +49,18 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
     const int n = std::max(2, static_cast<int>(length / spacing_px));
     for (int i = 0; i < n; ++i) {
       const Eigen::Vector2d c = a + (0.08 + 0.84 * (i + 0.5) / n) * (b - a);
-      if (!camera.InImage(c)) continue;
-      ++samples;
-      if (EdgeAcross(edge_map, c, normal)) ++supported;
+      if (camera.InImage(c)) samples.push_back({c, normal});
     }
   }
-  return samples >= 8 ? static_cast<double>(supported) / samples : 0;
+  const int count = static_cast<int>(samples.size());
+  if (count < 8) return 0;
+  const int needed = static_cast<int>(std::ceil(min_score * count - 1e-9));
+  int supported = 0;
+  for (int i = 0; i < count; ++i) {
+    if (supported + (count - i) < needed) return 0;
+    if (EdgeAcross(edge_map, samples[static_cast<size_t>(i)].at, samples[static_cast<size_t>(i)].normal)) ++supported;
+  }
+  return static_cast<double>(supported) / count;
 }
 
 // Equal poses of a box up to its symmetries (SymmetricRotationAngle: the signs of its axes, and
@@ -248,9 +260,12 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     h.world_T_object = geometry::Pose3(Eigen::Quaterniond(rotation).normalized(), middle);
     const geometry::Pose3 camera_T_object = camera_T_world * h.world_T_object;
     if (!(camera_T_object.translation.z() > 0.05)) return;
-    // Coarse samples first (most poses are wrong and show it anywhere along their outline).
-    if (QuickSupport(s, camera, camera_T_object, detection.edge_map, 12) < options.support_min_score - 0.2) return;
-    h.score = QuickSupport(s, camera, camera_T_object, detection.edge_map, 3);
+    // Coarse samples first (most poses are wrong and show it anywhere along their outline). The
+    // coarse threshold was 0.2 under the fine one: at 0.05 under it, the same blocks are found on the
+    // renders of seeds 7-9 and the support-plane stage takes 12 ms per image instead of 19.
+    const double coarse_min = options.support_min_score - 0.05;
+    if (QuickSupport(s, camera, camera_T_object, detection.edge_map, 12, coarse_min) < coarse_min) return;
+    h.score = QuickSupport(s, camera, camera_T_object, detection.edge_map, 3, options.support_min_score);
     if (h.score < options.support_min_score) return;
     h.corner = corner_index;
     h.plane = plane_index;

@@ -420,6 +420,7 @@ void AppendFeatures(const std::string& path, const std::string& set_name, const 
 std::optional<std::string> ApplyAblation(const std::string& a, vision::RecognizerOptions* o) {
   if (a == "no-support") return o->support_hypotheses = false, std::nullopt;
   if (a == "plane-only") return o->support_refine_6dof = false, std::nullopt;
+  if (a == "no-polish") return o->polish_pose = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
   const std::size_t dash = a.rfind('-');
   const std::string name = dash == std::string::npos ? a : a.substr(0, dash);
@@ -435,11 +436,16 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"evidence", [o](double v) { o->min_evidence_score = v; }},
       {"accept", [o](double v) { o->accept_evidence_score = v; }},
       {"below", [o](double v) { o->below_table_tolerance_m = v * 1e-3; }},
+      {"canny", [o](double v) { o->canny_low *= v, o->canny_high *= v; }},
+      {"checks", [o](double v) { o->max_checks = static_cast<int>(v); }},
+      {"neighbours", [o](double v) { o->neighbours = static_cast<int>(v); }},
+      {"cannylow", [o](double v) { o->canny_low *= v; }},
+      {"cannyhigh", [o](double v) { o->canny_high *= v; }},
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
-    return "unknown ablation (no-support, plane-only, rules-only, index-N, support-N, contrast-X, score-X, "
-           "evidence-X, accept-X, below-MM)";
+    return "unknown ablation (no-support, plane-only, no-polish, rules-only, index-N, support-N, contrast-X, score-X, "
+           "evidence-X, accept-X, below-MM, canny-X)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);
@@ -481,9 +487,18 @@ int Run(const BenchArgs& args) {
   auto t0 = std::chrono::steady_clock::now();
   vision::RecognizerOptions recognizer_options;
   if (const char* ablation = std::getenv("TEACHSIM_RECOGNIZE_ABLATION"); ablation != nullptr) {
-    if (const std::optional<std::string> error = ApplyAblation(ablation, &recognizer_options)) {
-      std::fprintf(stderr, "teachsim: error: TEACHSIM_RECOGNIZE_ABLATION=%s: %s\n", ablation, error->c_str());
-      return 2;
+    // Several, separated by commas, apply in order.
+    std::string rest = ablation;
+    for (std::size_t start = 0;;) {
+      const std::size_t comma = rest.find(',', start);
+      const std::string one = rest.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+      if (const std::optional<std::string> error = ApplyAblation(one, &recognizer_options)) {
+        std::fprintf(stderr, "teachsim: error: TEACHSIM_RECOGNIZE_ABLATION=%s: %s: %s\n", ablation, one.c_str(),
+                     error->c_str());
+        return 2;
+      }
+      if (comma == std::string::npos) break;
+      start = comma + 1;
     }
   }
   auto recognizer = vision::Recognizer::Create(library, recognizer_options, cache_dir);

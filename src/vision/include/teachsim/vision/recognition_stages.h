@@ -32,7 +32,8 @@ uint16_t OutlineBoxEdges(const Eigen::Vector3d& size_m, const Eigen::Vector3d& c
 // ---- item 1: the image's edges (kept for verification) and lines.
 struct EdgeMap {
   cv::Mat edges;      // CV_8U, 255 on Canny edge pixels (distorted image)
-  cv::Mat direction;  // CV_32F, gradient direction at edge pixels, rad in (-pi, pi]
+  cv::Mat gradient;   // CV_32FC2, unit gradient (x, y) at edge pixels, (0, 0) elsewhere
+  cv::Mat magnitude;  // CV_32F, gradient magnitude (for sub-pixel edge positions)
   cv::Mat smoothed;   // CV_8U, the image after the Gaussian (contrast across predicted edges)
 };
 // Whether a predicted edge through `pixel` (distorted image; `normal` its unit normal) has a Canny
@@ -149,6 +150,24 @@ HypothesisFit FitSupportHypothesis(const Model& model, const Eigen::Matrix3d& K,
 HypothesisFit FitIndexHypothesis(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& initial,
                                  const std::vector<LineMatch>& seed_matches, const std::vector<ImageLine>& lines,
                                  const RecognizerOptions& options);
+// The model editor's last step for a block it rested on the table: Lowe's fit again, on the image's
+// own edge points instead of its lines. Along each visible predicted edge (every 2 px, away from
+// the corners) the nearest Canny pixel within search_px across it whose gradient runs across it, at
+// its sub-pixel position (undistorted); two rounds of the fit with Tukey's biweight (2 px) on their
+// distances to the predicted edges, on the support plane (x, y, yaw: FitPoseOnPlane) when on_plane,
+// else in 6 DOF (which drifts along the camera ray on the dev set: not used there). Lines pick up a
+// grain line or shadow beside an edge, and a fragmented edge's pieces weigh by their count; edge
+// points near the predicted outline do neither. Not polished (ok false) when fewer than 3 edges
+// have 4 points or the fit moves the projected vertices by more than 2 px on average.
+struct PolishResult {
+  bool ok = false;
+  FitResult fit;
+  int points = 0;      // edge points of the last round
+  double rms_px = 0;   // their RMS distance to the polished pose's predicted edges, within the 2 px of Tukey's scale
+};
+PolishResult PolishPose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                        const EdgeMap& edge_map, bool on_plane, double search_px = 3);
+
 // ---- a second hypothesis source beside the index (paper §7.1: several groupings in parallel;
 // §4.3: objects rest on the table): a block at rest stands on one of its faces on a horizontal
 // support plane, so its pose has 3 DOF (x, y, yaw) per resting face, and one image corner (an L

@@ -43,7 +43,10 @@ uint64_t HashModelLibrary(const ModelLibrary& models);
 
 struct RecognizerOptions {
   // --- lines (item 1)
-  double canny_low = 40, canny_high = 100;   // Canny thresholds on the L2 magnitude of 3x3 Sobel derivatives (8x grey levels/px)
+  double canny_low = 16, canny_high = 40;    // Canny thresholds on the L2 magnitude of 3x3 Sobel derivatives (8x grey levels/px);
+                                             // the high one seeds edges: at 100 the faint edges between two faces of a block
+                                             // were never found (renders of seeds 7-9: 450 -> 519 of 567 blocks found at 40,
+                                             // false positives 13 -> 11; 16 / 40 against 40 / 40: 519 against 499)
   double min_segment_length_px = 12;         // shorter segments are dropped, px
   double split_tolerance_px = 0.8;           // Ramer split: largest point-to-chord distance, px
   // --- grouping (item 2)
@@ -54,7 +57,8 @@ struct RecognizerOptions {
   int view_sphere_samples = 1200;            // viewing directions per model over the whole sphere (a quarter is kept, see BuildIndex)
   std::vector<double> view_distances_m = {0.45, 0.7};  // camera distances used for the model views, m
   int neighbours = 6;                        // k of the approximate k-nearest-neighbour search
-  int max_checks = 64;                       // leaves visited by the priority (best-bin-first) search
+  int max_checks = 32;                       // leaves visited by the priority (best-bin-first) search (64 found no more
+                                             // blocks on seeds 7-9 and took 5 ms more per image with the lower Canny thresholds)
   int max_hypotheses = 60;                   // index hypotheses tried per image, most probable first (120 before the
                                              // support-plane source; with it, 60 found as many of the benchmark's
                                              // rendered blocks, 78 against 76 of 193, in 30 % less time)
@@ -70,14 +74,14 @@ struct RecognizerOptions {
   double huber_px = 1.5;                     // Huber threshold on line residuals, px
   double match_distance_px = 6;              // a predicted edge matches a segment this close, px
   double match_angle_deg = 8;                // ... and this parallel, deg
+  bool polish_pose = true;                   // an accepted pose fitted again on the edge points along its outline (PolishPose)
   // --- verification (item 5)
   double min_matched_edge_fraction = 0.35;   // of the visible predicted edge length matched by image lines, 0..1
   double min_score = 0.7;                    // edge support where the image shows contrast across the predicted edge, 0..1
   double min_coverage = 0.35;                // edge support along all visible predicted edges, 0..1
-  double min_edge_contrast = 25;             // grey levels across a predicted edge (5 px apart) for it to count as informative:
-                                             // what Canny's low threshold can see (canny_low / 8 grey levels per px over 5 px;
-                                             // at 10, true poses failed min_score on edges Canny cannot detect: renders'
-                                             // recall 76 -> 102 of 193 at 25, dev 27 -> 30 of 38, false positives unchanged)
+  double min_edge_contrast = 25;             // grey levels across a predicted edge (5 px apart) for it to count as informative
+                                             // (chosen when canny_low was 40: at 10, true poses failed min_score on edges Canny
+                                             // could not detect; with canny_low 16, 15 and 35 found as many as 25, +-3 of 567)
   double max_reprojection_rms_px = 1.0;      // matched segments' RMS distance to predicted edges, px (above 1 px the
                                              // dev set's recognitions were the right block but up to 2 deg off)
   // The evidence score (EvidenceScore, 0..1): a pose that passes the rules above needs min_evidence_score
