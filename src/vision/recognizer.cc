@@ -57,6 +57,7 @@ Status RecognizerOptions::Validate() const {
   for (double d : view_distances_m) TEACHSIM_RETURN_IF_ERROR(positive("view_distances_m[]", d));
   TEACHSIM_RETURN_IF_ERROR(positive("neighbours", neighbours));
   TEACHSIM_RETURN_IF_ERROR(positive("max_checks", max_checks));
+  TEACHSIM_RETURN_IF_ERROR(positive("max_index_queries", max_index_queries));
   TEACHSIM_RETURN_IF_ERROR(positive("max_hypotheses", max_hypotheses));
   TEACHSIM_RETURN_IF_ERROR(positive("max_support_hypotheses", max_support_hypotheses));
   TEACHSIM_RETURN_IF_ERROR(fraction("support_min_score", support_min_score));
@@ -988,6 +989,22 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
         if (static_cast<int>(groups[g].kind) == k) members.push_back(static_cast<int>(g));
       }
       if (members.empty()) continue;
+      // The most salient groups (longest segments in all) when there are more than the search can
+      // afford: only the best max_hypotheses hypotheses are fitted, and on wood grain or clutter
+      // most groups are short texture lines.
+      if (static_cast<int>(members.size()) > options_.max_index_queries) {
+        auto length = [&](int g) {
+          double sum = 0;
+          const Group& group = groups[static_cast<size_t>(g)];
+          for (int s = 0; s < GroupSegments(group.kind); ++s) sum += lines[static_cast<size_t>(group.segments[static_cast<size_t>(s)])].Length();
+          return sum;
+        };
+        std::vector<std::pair<double, int>> ranked;
+        for (int g : members) ranked.push_back({-length(g), g});
+        std::partial_sort(ranked.begin(), ranked.begin() + options_.max_index_queries, ranked.end());
+        members.resize(static_cast<size_t>(options_.max_index_queries));
+        for (int i = 0; i < options_.max_index_queries; ++i) members[static_cast<size_t>(i)] = ranked[static_cast<size_t>(i)].second;
+      }
       const int dim = GroupDimension(static_cast<GroupKind>(k));
       cv::Mat queries(static_cast<int>(members.size()), dim, CV_32F);
       for (size_t i = 0; i < members.size(); ++i) {

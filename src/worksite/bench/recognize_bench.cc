@@ -438,6 +438,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"below", [o](double v) { o->below_table_tolerance_m = v * 1e-3; }},
       {"canny", [o](double v) { o->canny_low *= v, o->canny_high *= v; }},
       {"matched", [o](double v) { o->min_matched_edge_fraction = v; }},
+      {"queries", [o](double v) { o->max_index_queries = static_cast<int>(v); }},
       {"checks", [o](double v) { o->max_checks = static_cast<int>(v); }},
       {"neighbours", [o](double v) { o->neighbours = static_cast<int>(v); }},
       {"cannylow", [o](double v) { o->canny_low *= v; }},

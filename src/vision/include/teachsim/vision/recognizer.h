@@ -59,6 +59,8 @@ struct RecognizerOptions {
   int neighbours = 6;                        // k of the approximate k-nearest-neighbour search
   int max_checks = 32;                       // leaves visited by the priority (best-bin-first) search (64 found no more
                                              // blocks on seeds 7-9 and took 5 ms more per image with the lower Canny thresholds)
+  int max_index_queries = 150;               // groups per kind looked up in the index, longest first (images with wood
+                                             // grain give up to 1000; on seeds 7-13 150 found as many, +2, p90 time -10 ms)
   int max_hypotheses = 60;                   // index hypotheses tried per image, most probable first (120 before the
                                              // support-plane source; with it, 60 found as many of the benchmark's
                                              // rendered blocks, 78 against 76 of 193, in 30 % less time)
