@@ -30,6 +30,7 @@ std::optional<LinkEvent> LinkWatchdog::Restore(const char* reason) {
   bool was_lost = state_ == LinkState::kLost;
   state_ = LinkState::kUp;
   last_received_ = clock_->Now();
+  last_check_ = last_received_;
   if (!was_lost) return std::nullopt;
   return LinkEvent{LinkEvent::Kind::kRestored, 0.0, reason};
 }
@@ -50,6 +51,10 @@ std::optional<LinkEvent> LinkWatchdog::OnDisconnected() {
 
 std::optional<LinkEvent> LinkWatchdog::Check() {
   if (state_ != LinkState::kUp) return std::nullopt;
+  const TimePoint now = clock_->Now();
+  const double since_last_check = ToSeconds(now - last_check_);
+  last_check_ = now;
+  if (since_last_check > options_.timeout_s) return std::nullopt;  // starved: the next check decides
   double silent = SilentSeconds();
   if (silent <= options_.timeout_s) return std::nullopt;
   state_ = LinkState::kLost;

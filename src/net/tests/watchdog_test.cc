@@ -78,6 +78,39 @@ TEST(Watchdog, DetectionLatencyIsTheTimeoutPlusAtMostOneCheckPeriod) {
   }
 }
 
+// The checking thread starved for a second (a busy machine, a long handler before the timer's):
+// the late check does not call the link lost, since heartbeats may be waiting in the socket behind
+// it; read, they keep the link up. With nothing waiting, the next check, a period later, reports the
+// loss.
+TEST(Watchdog, AStarvedCheckerDefersTheVerdictToItsNextCheck) {
+  for (bool heartbeats_waiting : {true, false}) {
+    ManualClock clock;
+    LinkWatchdog dog(clock, WatchdogOptions{0.25});
+    (void)dog.OnConnected();
+    for (int i = 0; i < 4; ++i) {
+      clock.AdvanceSeconds(0.05);
+      (void)dog.OnReceived();
+      EXPECT_FALSE(dog.Check());
+    }
+    clock.AdvanceSeconds(1.0);
+    EXPECT_FALSE(dog.Check()) << "a check a second late must not decide";
+    EXPECT_EQ(dog.state(), LinkState::kUp);
+    if (heartbeats_waiting) {
+      EXPECT_FALSE(dog.OnReceived());
+    }
+    clock.AdvanceSeconds(0.05);
+    const std::optional<LinkEvent> next = dog.Check();
+    if (heartbeats_waiting) {
+      EXPECT_FALSE(next);
+      EXPECT_EQ(dog.state(), LinkState::kUp);
+    } else {
+      ASSERT_TRUE(next);
+      EXPECT_EQ(next->kind, LinkEvent::Kind::kLost);
+      EXPECT_NEAR(next->silent_s, 1.05, 1e-9);
+    }
+  }
+}
+
 TEST(Watchdog, OptionsAreValidated) {
   EXPECT_FALSE(WatchdogOptions{0.0}.Validate().ok());
   EXPECT_FALSE(WatchdogOptions{-1.0}.Validate().ok());

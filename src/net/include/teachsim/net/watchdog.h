@@ -37,7 +37,11 @@ class LinkWatchdog {
   // The connection closed: the link is lost at once (no need to wait for the silence).
   std::optional<LinkEvent> OnDisconnected();
   // Call periodically (every heartbeat period at least): returns kLost once when the silence
-  // exceeds the timeout.
+  // exceeds the timeout. A check that comes more than the timeout after the previous one (or after
+  // the last arrival, for the first) says nothing: the checking thread itself was starved (a busy
+  // machine, a long handler before it), and what arrived meanwhile may still wait in the socket
+  // behind this check; the next check, one period later, decides. A real loss during the
+  // starvation is then reported one check period later than otherwise.
   std::optional<LinkEvent> Check();
 
   LinkState state() const { return state_; }
@@ -51,6 +55,7 @@ class LinkWatchdog {
   WatchdogOptions options_;
   LinkState state_ = LinkState::kIdle;
   TimePoint last_received_{};
+  TimePoint last_check_{};
 };
 
 }  // namespace teachsim::net
