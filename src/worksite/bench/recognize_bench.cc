@@ -15,9 +15,10 @@
 // out (for quick runs while working on the recognizer); TEACHSIM_RECOGNIZE_RENDER_SEED=N another set
 // of random scenes; TEACHSIM_RECOGNIZE_FEATURES=FILE appends the evidence of every fitted hypothesis
 // with its truth label (see AppendFeatures; tools/fit_evidence_weights.py fits the evidence score to
-// it); TEACHSIM_RECOGNIZE_ABLATION runs the recognizer with one option changed (see below:
-// no-support, plane-only, index-N, contrast-X, score-X, evidence-X, accept-X, rules-only, below-MM,
-// support-N). For teachsim, every scored object is put down to the stage that lost it
+// it); TEACHSIM_RECOGNIZE_ABLATION runs the recognizer with options changed, several separated by
+// commas (see ApplyAblation: no-support, plane-only, no-polish, rules-only, index-N, support-N,
+// contrast-X, score-X, evidence-X, accept-X, below-MM, canny-X (both thresholds times X), cannylow-X,
+// cannyhigh-X, checks-N, neighbours-N, queries-N, matched-X, supportmin-X). For teachsim, every scored object is put down to the stage that lost it
 // (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
 
@@ -439,6 +440,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"canny", [o](double v) { o->canny_low *= v, o->canny_high *= v; }},
       {"matched", [o](double v) { o->min_matched_edge_fraction = v; }},
       {"queries", [o](double v) { o->max_index_queries = static_cast<int>(v); }},
+      {"supportmin", [o](double v) { o->support_min_score = v; }},
       {"checks", [o](double v) { o->max_checks = static_cast<int>(v); }},
       {"neighbours", [o](double v) { o->neighbours = static_cast<int>(v); }},
       {"cannylow", [o](double v) { o->canny_low *= v; }},
@@ -446,8 +448,9 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
-    return "unknown ablation (no-support, plane-only, no-polish, rules-only, index-N, support-N, contrast-X, score-X, "
-           "evidence-X, accept-X, below-MM, canny-X)";
+    return "unknown ablation (no-support, plane-only, no-polish, rules-only, index-N, support-N, contrast-X, "
+           "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, checks-N, neighbours-N, "
+           "queries-N, matched-X, supportmin-X)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);
