@@ -18,7 +18,8 @@
 // it); TEACHSIM_RECOGNIZE_ABLATION runs the recognizer with options changed, several separated by
 // commas (see ApplyAblation: no-support, plane-only, no-polish, rules-only, index-N, support-N,
 // contrast-X, score-X, evidence-X, accept-X, below-MM, canny-X (both thresholds times X), cannylow-X,
-// cannyhigh-X, checks-N, neighbours-N, queries-N, matched-X, supportmin-X). For teachsim, every scored object is put down to the stage that lost it
+// cannyhigh-X, checks-N, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX).
+// For teachsim, every scored object is put down to the stage that lost it
 // (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
 
@@ -440,6 +441,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"canny", [o](double v) { o->canny_low *= v, o->canny_high *= v; }},
       {"matched", [o](double v) { o->min_matched_edge_fraction = v; }},
       {"queries", [o](double v) { o->max_index_queries = static_cast<int>(v); }},
+      {"seglen", [o](double v) { o->min_segment_length_px = v; }},
+      {"junction", [o](double v) { o->junction_gap_px = v; }},
       {"supportmin", [o](double v) { o->support_min_score = v; }},
       {"checks", [o](double v) { o->max_checks = static_cast<int>(v); }},
       {"neighbours", [o](double v) { o->neighbours = static_cast<int>(v); }},
@@ -450,7 +453,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, rules-only, index-N, support-N, contrast-X, "
            "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, checks-N, neighbours-N, "
-           "queries-N, matched-X, supportmin-X)";
+           "queries-N, matched-X, supportmin-X, seglen-PX, junction-PX)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);
