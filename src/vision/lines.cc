@@ -216,23 +216,29 @@ std::vector<ImageLine> DetectLines(const cv::Mat& image_gray8, const Camera& cam
   return DetectLinesAndEdges(image_gray8, camera, options).lines;
 }
 
-int SignedEdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
+std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel,
+                                         const Eigen::Vector2d& normal, int max_offset_px) {
   // The hottest loop of the recognizer (every support hypothesis and verified pose samples it): the
   // nearest pixel by floor(v + 0.5), and the unit gradient stored per edge pixel (no trigonometry).
   static const float cos_tol = static_cast<float>(std::cos(25 * M_PI / 180));
   const int cols = edge_map.edges.cols, rows = edge_map.edges.rows;
   const float nx = static_cast<float>(normal.x()), ny = static_cast<float>(normal.y());
-  for (int o = 0; o <= 4; ++o) {
+  for (int o = 0; o <= 2 * max_offset_px; ++o) {
     const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
     const int x = static_cast<int>(std::floor(pixel.x() + offset * normal.x() + 0.5));
     const int y = static_cast<int>(std::floor(pixel.y() + offset * normal.y() + 0.5));
     if (x < 0 || y < 0 || x >= cols || y >= rows) continue;
     if (!edge_map.edges.ptr<uint8_t>(y)[x]) continue;
     const cv::Vec2f g = edge_map.gradient.ptr<cv::Vec2f>(y)[x];
-    const float c = g[0] * nx + g[1] * ny;
-    if (std::abs(c) >= cos_tol) return c > 0 ? 1 : -1;
+    if (std::abs(g[0] * nx + g[1] * ny) >= cos_tol) return EdgePixel{x, y, g[0], g[1]};
   }
-  return 0;
+  return std::nullopt;
+}
+
+int SignedEdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
+  const std::optional<EdgePixel> p = EdgePixelAcross(edge_map, pixel, normal, 2);
+  if (!p) return 0;
+  return p->gx * static_cast<float>(normal.x()) + p->gy * static_cast<float>(normal.y()) > 0 ? 1 : -1;
 }
 
 bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {

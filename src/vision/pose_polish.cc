@@ -3,7 +3,9 @@
 // edge; the Canny points nearest the predicted outline, each weighed once, do not.
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <optional>
 #include <vector>
 
 #include "sampling.h"
@@ -21,7 +23,6 @@ constexpr double kTukeyPx = 2, kMaxMovePx = 2;
 // The edge points near the predicted visible edges at a pose, as zero-length segments for the line fit.
 std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                                   const EdgeMap& edge_map, double search_px, int* edges_with_points) {
-  static const double cos_tol = std::cos(25 * M_PI / 180);
   const Eigen::Matrix3d K = camera.K();
   const Intrinsics& k = camera.intrinsics();
   const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
@@ -44,28 +45,19 @@ std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera, cons
       const auto ahead = camera.ProjectFromCamera(x + 0.01 * (b - a), 0.05);
       if (!here || !ahead || !camera.InImage(*here)) continue;
       const Eigen::Vector2d along = (*ahead - *here).normalized(), normal(-along.y(), along.x());
-      // The nearest edge pixel across the edge (0, +1, -1, +2, ...) whose gradient runs across it.
-      for (int o = 0; o <= 2 * steps; ++o) {
-        const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
-        const int px = static_cast<int>(std::floor(here->x() + offset * normal.x() + 0.5));
-        const int py = static_cast<int>(std::floor(here->y() + offset * normal.y() + 0.5));
-        if (px < 0 || py < 0 || px >= edge_map.edges.cols || py >= edge_map.edges.rows) continue;
-        if (!edge_map.edges.ptr<uint8_t>(py)[px]) continue;
-        const cv::Vec2f g = edge_map.gradient.ptr<cv::Vec2f>(py)[px];
-        if (std::abs(g[0] * normal.x() + g[1] * normal.y()) < cos_tol) continue;
-        const Eigen::Vector2d gradient(g[0], g[1]);
-        const Eigen::Vector2d distorted =
-            Eigen::Vector2d(px, py) + gradient * internal::SubPixelEdgeOffset(edge_map.magnitude, px, py, g[0], g[1]);
-        // Undistorted, starting from the predicted point's ideal coordinates.
-        const Eigen::Vector2d start = x.head<2>() / x.z();
-        const auto ideal =
-            camera.Undistort(Eigen::Vector2d((distorted.x() - k.cx) / k.fx, (distorted.y() - k.cy) / k.fy), start);
-        if (!ideal) break;
-        const Eigen::Vector2d p(k.fx * ideal->x() + k.cx, k.fy * ideal->y() + k.cy);
-        out.push_back({e, p, p});
-        ++found;
-        break;
-      }
+      const std::optional<EdgePixel> edge = EdgePixelAcross(edge_map, *here, normal, steps);
+      if (!edge) continue;
+      const Eigen::Vector2d distorted =
+          Eigen::Vector2d(edge->x, edge->y) +
+          Eigen::Vector2d(edge->gx, edge->gy) *
+              internal::SubPixelEdgeOffset(edge_map.magnitude, edge->x, edge->y, edge->gx, edge->gy);
+      // Undistorted, starting from the predicted point's ideal coordinates.
+      const auto ideal = camera.Undistort(
+          Eigen::Vector2d((distorted.x() - k.cx) / k.fx, (distorted.y() - k.cy) / k.fy), x.head<2>() / x.z());
+      if (!ideal) continue;
+      const Eigen::Vector2d p(k.fx * ideal->x() + k.cx, k.fy * ideal->y() + k.cy);
+      out.push_back({e, p, p});
+      ++found;
     }
     if (found >= kMinPointsPerEdge) ++*edges_with_points;
   }
@@ -99,11 +91,13 @@ PolishResult PolishPose(const Model& model, const Camera& camera, const geometry
   }
   if (moved > kMaxMovePx) return out;
   // The residual of the points within Tukey's scale (the rest are not the block's edge).
+  std::array<Eigen::Vector2d, 8> vertex_px;
+  for (int i = 0; i < 8; ++i) vertex_px[static_cast<size_t>(i)] = (K * (pose * BoxVertex(model.box_size_m, i))).hnormalized();
   double sum = 0;
   int count = 0;
   for (const LineMatch& m : points) {
-    const Eigen::Vector2d a = (K * (pose * BoxVertex(model.box_size_m, kBoxEdges[static_cast<size_t>(m.edge)][0]))).hnormalized();
-    const Eigen::Vector2d b = (K * (pose * BoxVertex(model.box_size_m, kBoxEdges[static_cast<size_t>(m.edge)][1]))).hnormalized();
+    const Eigen::Vector2d& a = vertex_px[static_cast<size_t>(kBoxEdges[static_cast<size_t>(m.edge)][0])];
+    const Eigen::Vector2d& b = vertex_px[static_cast<size_t>(kBoxEdges[static_cast<size_t>(m.edge)][1])];
     const Eigen::Vector2d d = (b - a).normalized();
     const double r = std::abs(d.x() * (m.a.y() - a.y()) - d.y() * (m.a.x() - a.x()));
     if (r <= kTukeyPx) sum += r * r, ++count;

@@ -993,17 +993,19 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       // afford: only the best max_hypotheses hypotheses are fitted, and on wood grain or clutter
       // most groups are short texture lines.
       if (static_cast<int>(members.size()) > options_.max_index_queries) {
-        auto length = [&](int g) {
-          double sum = 0;
+        std::vector<double> length(groups.size(), 0.0);  // of each group's segments, px
+        for (int g : members) {
           const Group& group = groups[static_cast<size_t>(g)];
-          for (int s = 0; s < GroupSegments(group.kind); ++s) sum += lines[static_cast<size_t>(group.segments[static_cast<size_t>(s)])].Length();
-          return sum;
-        };
-        std::vector<std::pair<double, int>> ranked;
-        for (int g : members) ranked.push_back({-length(g), g});
-        std::partial_sort(ranked.begin(), ranked.begin() + options_.max_index_queries, ranked.end());
-        members.resize(static_cast<size_t>(options_.max_index_queries));
-        for (int i = 0; i < options_.max_index_queries; ++i) members[static_cast<size_t>(i)] = ranked[static_cast<size_t>(i)].second;
+          for (int s = 0; s < GroupSegments(group.kind); ++s) {
+            length[static_cast<size_t>(g)] += lines[static_cast<size_t>(group.segments[static_cast<size_t>(s)])].Length();
+          }
+        }
+        const auto keep = members.begin() + options_.max_index_queries;
+        std::partial_sort(members.begin(), keep, members.end(), [&](int a, int b) {
+          const double la = length[static_cast<size_t>(a)], lb = length[static_cast<size_t>(b)];
+          return la != lb ? la > lb : a < b;
+        });
+        members.erase(keep, members.end());
       }
       const int dim = GroupDimension(static_cast<GroupKind>(k));
       cv::Mat queries(static_cast<int>(members.size()), dim, CV_32F);
@@ -1260,7 +1262,6 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     if (failed) continue;
     verify(entry.model, fit, traced);
   }
-
   const auto t4 = Clock::now();
 
   // Culling what floats (§7.1: poses that cannot be real): each recognition rests on the table, on
@@ -1354,10 +1355,10 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     Recognition r;
     r.model = model.name;
     r.raw_world_T_object = world_T_camera * c.camera_T_object;
+    r.world_T_object = r.raw_world_T_object;
     r.score = c.evidence.support_fraction;
     r.matched_edge_fraction = c.matches.matched_fraction;
     r.reprojection_rms_px = c.rms_px;
-    r.world_T_object = r.raw_world_T_object;
     Eigen::Matrix<double, 6, 6> b = Eigen::Matrix<double, 6, 6>::Zero();
     b.block<3, 3>(0, 0) = world_T_camera.RotationMatrix();
     b.block<3, 3>(3, 3) = world_T_camera.RotationMatrix();
@@ -1413,7 +1414,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
           char buf[128];
           std::snprintf(buf, sizeof(buf), "fitted on the table to %d edge points: moved %.2f mm, turned %.2f deg",
                         polished.points, 1000 * (r.world_T_object.translation - before.translation).norm(),
-                        2 * std::asin(std::min(1.0, (r.world_T_object.rotation * before.rotation.conjugate()).vec().norm())) * 180 / M_PI);
+                        r.world_T_object.rotation.angularDistance(before.rotation) * 180 / M_PI);
           r.adjustments.push_back(buf);
         }
       }

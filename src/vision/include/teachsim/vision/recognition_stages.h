@@ -6,6 +6,7 @@
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -36,6 +37,15 @@ struct EdgeMap {
   cv::Mat magnitude;  // CV_32F, gradient magnitude (for sub-pixel edge positions)
   cv::Mat smoothed;   // CV_8U, the image after the Gaussian (contrast across predicted edges)
 };
+// The nearest Canny edge pixel across a predicted edge through `pixel` (distorted image; 0, +1,
+// -1, +2, -2, ... px along the unit `normal`, up to max_offset_px) whose gradient runs across the
+// edge (within 25 deg): what edge support (2 px) and the editor's fit on edge points (3 px) look for.
+struct EdgePixel {
+  int x = 0, y = 0;
+  float gx = 0, gy = 0;  // the unit gradient there
+};
+std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel,
+                                         const Eigen::Vector2d& normal, int max_offset_px);
 // Whether a predicted edge through `pixel` (distorted image; `normal` its unit normal) has a Canny
 // edge pixel within 2 px across it whose gradient runs across it (within 25 deg): edge support.
 bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal);
