@@ -8,7 +8,8 @@
 // error, reprojection RMS and time per image (thread CPU time, one OpenCV thread).
 // Environment: TEACHSIM_HOME (repository), TEACHSIM_SHARED (../shared), TEACHSIM_CACHE_DIR
 // (templates and index; default: bench-cache beside the executable, in the build folder);
-// TEACHSIM_RECOGNIZE_DUMP=DIR draws the images with a miss or a false detection (see DumpCase);
+// TEACHSIM_RECOGNIZE_DUMP=DIR draws the images with a miss or a false detection, with the detected
+// segments and Canny edges (see DumpCase);
 // TEACHSIM_RECOGNIZE_DEBUG=1 prints every LINE-MOD match beside the truth (and, for the recognizer,
 // each image's stage counts and times, each object it missed with the stage that lost it and the
 // evidence at the true pose, and each false detection); TEACHSIM_RECOGNIZE_NO_PEER=1 leaves LINE-MOD
@@ -296,9 +297,10 @@ std::optional<vision::FitResult> RefineWithFit(const Eigen::Vector3d& size, cons
 }
 
 // TEACHSIM_RECOGNIZE_DUMP=DIR: each image with a missed block or a false detection, as DIR/NAME.png
-// with the truth's visible edges (green), found recognitions (blue) and false ones (red).
+// with the detected segments (yellow), the truth's visible edges (green), found recognitions (blue)
+// and false ones (red), and its Canny edges as DIR/NAME.edges.png.
 void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camera,
-              const std::map<std::string, Eigen::Vector3d>& sizes,
+              const std::map<std::string, Eigen::Vector3d>& sizes, const vision::LineDetection& detection,
               const std::vector<vision::Recognition>& objects, const vision::ImageEvaluation& evaluation) {
   bool interesting = evaluation.false_positives > 0;
   for (const vision::ObjectOutcome& o : evaluation.objects) interesting = interesting || o.detection < 0;
@@ -334,9 +336,22 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
       cv::putText(out, objects[d].model, cv::Point2d(p->x(), p->y()), cv::FONT_HERSHEY_SIMPLEX, 0.4,
                   cv::Scalar(0, 0, 255));
   }
-  cv::imwrite(
-      dir + "/" + c.name + (c.name.size() > 4 && c.name.substr(c.name.size() - 4) == ".png" ? "" : ".png"),
-      out);
+  // The detected segments (undistorted pixels) through the lens, in yellow over the outlines.
+  const Eigen::Matrix3d K = camera.K();
+  const Eigen::Matrix3d K_inverse = K.inverse();
+  auto to_image = [&](const Eigen::Vector2d& undistorted) {
+    const Eigen::Vector2d normalized = (K_inverse * undistorted.homogeneous()).hnormalized();
+    const Eigen::Vector2d px = (K * camera.Distort(normalized).homogeneous()).hnormalized();
+    return cv::Point2d(px.x(), px.y());
+  };
+  for (const vision::ImageLine& l : detection.lines) {
+    cv::line(out, to_image(l.a), to_image(l.b), cv::Scalar(0, 220, 255), 1, cv::LINE_AA);
+  }
+  const std::string stem = dir + "/" + (c.name.size() > 4 && c.name.substr(c.name.size() - 4) == ".png"
+                                             ? c.name.substr(0, c.name.size() - 4)
+                                             : c.name);
+  cv::imwrite(stem + ".png", out);
+  cv::imwrite(stem + ".edges.png", detection.edge_map.edges);
 }
 
 const char* OutcomeName(vision::RecognitionTrace::Outcome outcome) {
@@ -606,7 +621,7 @@ int Run(const BenchArgs& args) {
         }
         if (const char* dump_dir = std::getenv("TEACHSIM_RECOGNIZE_DUMP");
             evaluation.ok() && dump_dir != nullptr) {
-          DumpCase(dump_dir, c, *camera, truth->model_sizes_m, recognized->objects, *evaluation);
+          DumpCase(dump_dir, c, *camera, truth->model_sizes_m, detection, recognized->objects, *evaluation);
         }
         for (std::size_t i = 0; i < c.truth.size(); ++i) {
           const vision::TruthObject& t = c.truth[i];
