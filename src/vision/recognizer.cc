@@ -71,6 +71,11 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(fraction("min_score", min_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_coverage", min_coverage));
   if (!(min_edge_contrast >= 0)) return Status::InvalidInput("RecognizerOptions::min_edge_contrast must be >= 0");
+  TEACHSIM_RETURN_IF_ERROR(fraction("min_step_share", min_step_share));
+  if (!(step_offset_px > 0 && step_offset_px <= 20)) {
+    return Status::InvalidInput("RecognizerOptions::step_offset_px must be in (0, 20]");
+  }
+  if (!(min_step_grey >= 0)) return Status::InvalidInput("RecognizerOptions::min_step_grey must be >= 0");
   TEACHSIM_RETURN_IF_ERROR(positive("max_reprojection_rms_px", max_reprojection_rms_px));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_evidence_score", min_evidence_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("accept_evidence_score", accept_evidence_score));
@@ -499,8 +504,10 @@ void ForEachOutlineSample(const Eigen::Vector3d& box_size_m, const geometry::Pos
 // predicted outline, so that of two poses explaining the same image edges the one that predicts less
 // outline where the image shows nothing (an upright slab over a cube and the table) comes first. By
 // supported length times support fraction, the benchmark's demo (cornering, seed 7) lost the cube to
-// such a slab.
-double NetSupportPx(const PoseEvidence& e) { return e.supported_px * (2 - 1 / std::max(e.coverage, 1e-3)); }
+// such a slab. Only outline where the grey level steps across counts as supported length: a slab
+// laid onto a bar with one edge along a grain line of the bar's top otherwise outranked the bar
+// (its longer outline is as well supported, by the line).
+double NetSupportPx(const PoseEvidence& e) { return e.step_supported_px * (2 - 1 / std::max(e.coverage, 1e-3)); }
 
 // Image edges that run on past the ends of the predicted edges: a block's visible edges end at its
 // corners, but a smaller wrong model fitted onto part of a real block (a cube on a bar) or onto the
@@ -625,13 +632,20 @@ PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geo
   };
   std::array<PerEdge, 12> per_edge{};
   int samples = 0, on_fixed = 0, supported = 0, informative = 0, free_supported = 0, free_informative = 0;
+  int step_supported = 0;
   ForEachOutlineSample(
       model.box_size_m, camera_T_object, camera,
       [&](const Eigen::Vector3d&, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int e) {
         PerEdge& pe = per_edge[static_cast<size_t>(e)];
         ++samples;
         ++pe.samples;
-        const int sign = SignedEdgeAcross(detection.edge_map, c, normal);
+        const std::optional<EdgePixel> edge = EdgePixelAcross(detection.edge_map, c, normal, 2);
+        const int sign = !edge ? 0 : edge->gx * normal.x() + edge->gy * normal.y() > 0 ? 1 : -1;
+        if (edge && std::abs(SampleGrey(detection.edge_map.smoothed, c + options.step_offset_px * normal) -
+                             SampleGrey(detection.edge_map.smoothed, c - options.step_offset_px * normal)) >=
+                        options.min_step_grey) {
+          ++step_supported;
+        }
         const bool contrast =
             sign != 0 || std::abs(SampleGrey(detection.edge_map.smoothed, c + kContrastOffsetPx * normal) -
                                   SampleGrey(detection.edge_map.smoothed, c - kContrastOffsetPx * normal)) >=
@@ -653,6 +667,7 @@ PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geo
   out.support_fraction = informative > 0 ? static_cast<double>(supported) / informative : 0;
   out.coverage = samples > 0 ? static_cast<double>(supported) / samples : 0;
   out.supported_px = supported * kOutlineSpacingPx;
+  out.step_supported_px = step_supported * kOutlineSpacingPx;
   out.fixed_share = samples > 0 ? static_cast<double>(on_fixed) / samples : 0;
   out.free_support_fraction =
       free_informative > 0 ? static_cast<double>(free_supported) / free_informative : 0;
@@ -1143,6 +1158,12 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
                (evidence.long_continued_ends >= kPartMinContinuedEnds &&
                 evidence.coverage < kPartMaxCoverage)) {
       rule = Outcome::kSupport;
+    }
+    // Outline along thin lines: where most of the supported outline is a thin line (wood grain
+    // inside a face, a scratch) and not a step in grey level between two surfaces, the pose is a
+    // wrong model laid onto a block's texture, whatever the rest of its evidence.
+    if (evidence.step_supported_px < options_.min_step_share * evidence.supported_px) {
+      return reject(Outcome::kSupport);
     }
     // The evidence score over all of it (EvidenceScore): required of a pose that passes the rules,
     // and enough on its own when it is high.

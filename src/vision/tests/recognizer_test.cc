@@ -495,6 +495,58 @@ TEST(VerificationTest, TheEvidenceScoreSeparatesTheTruePoseFromWrongOnes) {
               truth, moved, crossing);
 }
 
+// The step rule: along a rendered block's outline the grey level steps from one surface to the
+// next; along the same outline drawn as thin dark lines on a plain grey table (wood grain, a
+// scratch) the edges are there but no step. Verification rejects the thin-line pose (min_step_share),
+// which, without the rule, passes on its edge support and lines alone.
+TEST(VerificationTest, AnOutlineOfThinLinesIsNoStepBetweenSurfaces) {
+  const Camera camera = SyntheticCamera();
+  const Model bar = Bar();
+  const geometry::Pose3 pose = OnTable(bar.box_size_m, 0.01, 0.0, 0.5);
+  const geometry::Pose3 camera_T_bar = camera.camera_T_world() * pose;
+  const RecognizerOptions options;
+
+  const cv::Mat rendered = RenderBoxes(camera, {{bar.box_size_m, pose}}, 13);
+  const PoseEvidence block = EvaluatePose(bar, camera, camera_T_bar, DetectLinesAndEdges(rendered, camera, options), options);
+  EXPECT_GT(block.coverage, 0.8);
+  EXPECT_GE(block.step_supported_px, 0.9 * block.supported_px);
+
+  cv::Mat drawn(camera.height(), camera.width(), CV_8U, cv::Scalar(150));
+  const uint16_t visible = VisibleBoxEdges(bar.box_size_m, camera_T_bar.Inverse().translation);
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    const Eigen::Vector2d a = *camera.Project(pose * BoxVertex(bar.box_size_m, kBoxEdges[e][0]));
+    const Eigen::Vector2d b = *camera.Project(pose * BoxVertex(bar.box_size_m, kBoxEdges[e][1]));
+    cv::line(drawn, cv::Point(static_cast<int>(std::lround(a.x() * 16)), static_cast<int>(std::lround(a.y() * 16))),
+             cv::Point(static_cast<int>(std::lround(b.x() * 16)), static_cast<int>(std::lround(b.y() * 16))),
+             cv::Scalar(105), 1, cv::LINE_AA, 4);
+  }
+  cv::Mat noise(drawn.size(), CV_8S);
+  cv::RNG rng(13);
+  rng.fill(noise, cv::RNG::NORMAL, 0, 2);
+  cv::add(drawn, noise, drawn, cv::noArray(), CV_8U);
+  const LineDetection lines = DetectLinesAndEdges(drawn, camera, options);
+  const PoseEvidence thin = EvaluatePose(bar, camera, camera_T_bar, lines, options);
+  EXPECT_GT(thin.coverage, 0.6);  // edges all along the drawn outline...
+  EXPECT_LT(thin.step_supported_px, 0.3 * thin.supported_px);  // ... but no step across them
+  std::printf("step share: rendered block %.2f (coverage %.2f), thin lines %.2f (coverage %.2f)\n",
+              block.step_supported_px / block.supported_px, block.coverage,
+              thin.step_supported_px / std::max(thin.supported_px, 1.0), thin.coverage);
+
+  // Recognition of the drawing: nothing with the rule, and (so that the rule is what decides) the
+  // bar without it.
+  for (const double share : {options.min_step_share, 0.0}) {
+    RecognizerOptions o = SmallIndexOptions();
+    o.min_step_share = share;
+    auto recognizer = Recognizer::Create({{Cube(), Bar()}}, o, "");
+    ASSERT_TRUE(recognizer.ok()) << recognizer.status().message();
+    auto result = recognizer->Recognize(drawn, camera, nullptr);
+    ASSERT_TRUE(result.ok()) << result.status().message();
+    std::printf("min_step_share %.2f: %zu recognitions\n", share, result->objects.size());
+    EXPECT_EQ(result->objects.size(), share > 0 ? 0u : 1u);
+  }
+}
+
 // The fixed world's edges, projected: a predicted edge along one of them is explained already; one
 // across it, or away from it, is not.
 TEST(VerificationTest, FixedEdgesAreFoundAlongTheProjectedFrame) {

@@ -19,7 +19,8 @@
 // it); TEACHSIM_RECOGNIZE_ABLATION runs the recognizer with options changed, several separated by
 // commas (see ApplyAblation: no-support, plane-only, no-polish, rules-only, index-N, support-N,
 // contrast-X, score-X, evidence-X, accept-X, below-MM, canny-X (both thresholds times X), cannylow-X,
-// cannyhigh-X, checks-N, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX).
+// cannyhigh-X, checks-N, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX,
+// stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX).
 // For teachsim, every scored object is put down to the stage that lost it
 // (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
@@ -418,12 +419,12 @@ void AppendFeatures(const std::string& path, const std::string& set_name, const 
     std::fprintf(
         f,
         "%s\t%s\t%s\t%d\t%s\t%d\t%.2f\t%.3f\t%.4f\t%.4f\t%.4f\t%.1f\t%.3f\t%.3f\t%d\t%d\t%d\t%.4f\t%.4f\t%.4f"
-        "\t%.1f\t%.4f\t%.0f\t%.0f\t%.4f\n",
+        "\t%.1f\t%.4f\t%.0f\t%.0f\t%.4f\t%.1f\n",
         set_name.c_str(), c.name.c_str(), model.name.c_str(), fitted.group_kind, OutcomeName(fitted.outcome),
         fitted.accepted ? 1 : 0, best, visible, e.matched_fraction, e.support_fraction, e.coverage,
         e.supported_px, e.rms_px, e.rms_closest_px, e.matches, e.continued_ends, e.long_continued_ends,
         e.fixed_share, e.free_support_fraction, e.free_coverage, e.free_supported_px, e.polarity,
-        e.edges_supported, e.edges_visible, vision::EvidenceScore(e));
+        e.edges_supported, e.edges_visible, vision::EvidenceScore(e), e.step_supported_px);
   }
   std::fclose(f);
 }
@@ -463,12 +464,15 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"neighbours", [o](double v) { o->neighbours = static_cast<int>(v); }},
       {"cannylow", [o](double v) { o->canny_low *= v; }},
       {"cannyhigh", [o](double v) { o->canny_high *= v; }},
+      {"stepshare", [o](double v) { o->min_step_share = v; }},
+      {"stepgrey", [o](double v) { o->min_step_grey = v; }},
+      {"stepoffset", [o](double v) { o->step_offset_px = v; }},
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, rules-only, index-N, support-N, contrast-X, "
            "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, checks-N, neighbours-N, "
-           "queries-N, matched-X, supportmin-X, seglen-PX, junction-PX)";
+           "queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, stepgrey-X, stepoffset-PX)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);

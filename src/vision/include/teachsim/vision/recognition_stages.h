@@ -257,6 +257,8 @@ struct PoseEvidence {
   double polarity = 0;          // of the supported samples, those whose edge's gradient has its edge's majority sign
   double edges_supported = 0;   // visible edges of >= 20 px with half their free samples supported
   double edges_visible = 0;     // visible edges of >= 20 px
+  double step_supported_px = 0; // supported length where the grey level steps across the edge (not a thin line):
+                                // RecognizerOptions::min_step_grey between step_offset_px either side
 };
 PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                           const LineDetection& detection, const RecognizerOptions& options,
