@@ -235,10 +235,13 @@ std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::V
   return std::nullopt;
 }
 
+int EdgeSign(const EdgePixel& edge, const Eigen::Vector2d& normal) {
+  return edge.gx * static_cast<float>(normal.x()) + edge.gy * static_cast<float>(normal.y()) > 0 ? 1 : -1;
+}
+
 int SignedEdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
   const std::optional<EdgePixel> p = EdgePixelAcross(edge_map, pixel, normal, 2);
-  if (!p) return 0;
-  return p->gx * static_cast<float>(normal.x()) + p->gy * static_cast<float>(normal.y()) > 0 ? 1 : -1;
+  return p ? EdgeSign(*p, normal) : 0;
 }
 
 bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {

@@ -640,7 +640,7 @@ PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geo
         ++samples;
         ++pe.samples;
         const std::optional<EdgePixel> edge = EdgePixelAcross(detection.edge_map, c, normal, 2);
-        const int sign = !edge ? 0 : edge->gx * normal.x() + edge->gy * normal.y() > 0 ? 1 : -1;
+        const int sign = edge ? EdgeSign(*edge, normal) : 0;
         if (edge && std::abs(SampleGrey(detection.edge_map.smoothed, c + options.step_offset_px * normal) -
                              SampleGrey(detection.edge_map.smoothed, c - options.step_offset_px * normal)) >=
                         options.min_step_grey) {

@@ -338,11 +338,9 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
                   cv::Scalar(0, 0, 255));
   }
   // The detected segments (undistorted pixels) through the lens, in yellow over the outlines.
-  const Eigen::Matrix3d K = camera.K();
-  const Eigen::Matrix3d K_inverse = K.inverse();
+  const Eigen::Matrix3d K_inverse = camera.K().inverse();
   auto to_image = [&](const Eigen::Vector2d& undistorted) {
-    const Eigen::Vector2d normalized = (K_inverse * undistorted.homogeneous()).hnormalized();
-    const Eigen::Vector2d px = (K * camera.Distort(normalized).homogeneous()).hnormalized();
+    const Eigen::Vector2d px = camera.NormalizedToPixel((K_inverse * undistorted.homogeneous()).hnormalized());
     return cv::Point2d(px.x(), px.y());
   };
   for (const vision::ImageLine& l : detection.lines) {

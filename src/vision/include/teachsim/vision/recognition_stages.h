@@ -46,6 +46,8 @@ struct EdgePixel {
 };
 std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel,
                                          const Eigen::Vector2d& normal, int max_offset_px);
+// The sign of an edge pixel's gradient along `normal`: +1 or -1 (its polarity across the edge).
+int EdgeSign(const EdgePixel& edge, const Eigen::Vector2d& normal);
 // Whether a predicted edge through `pixel` (distorted image; `normal` its unit normal) has a Canny
 // edge pixel within 2 px across it whose gradient runs across it (within 25 deg): edge support.
 bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal);
