@@ -61,6 +61,10 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(positive("max_hypotheses", max_hypotheses));
   TEACHSIM_RETURN_IF_ERROR(positive("max_support_hypotheses", max_support_hypotheses));
   TEACHSIM_RETURN_IF_ERROR(fraction("support_min_score", support_min_score));
+  if (!(max_alternative_fits >= 0)) {
+    return Status::InvalidInput("RecognizerOptions::max_alternative_fits = " +
+                                std::to_string(max_alternative_fits) + " must be >= 0 (0: none)");
+  }
   TEACHSIM_RETURN_IF_ERROR(positive("support_perpendicular_tol_deg", support_perpendicular_tol_deg));
   TEACHSIM_RETURN_IF_ERROR(positive("support_vertical_tol_deg", support_vertical_tol_deg));
   TEACHSIM_RETURN_IF_ERROR(positive("max_iterations", max_iterations));
@@ -1231,7 +1235,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       const geometry::Pose3 initial = camera_T_world * h.world_T_object;
       if (already_tried(h.model, initial)) continue;
       const Model& model = models_.models[static_cast<size_t>(h.model)];
-      RecognitionTrace::Fitted* traced = start_trace(h.model, kGroupKinds, initial);
+      RecognitionTrace::Fitted* traced = start_trace(h.model, kSupportKind, initial);
       const HypothesisFit fitted = FitSupportHypothesis(model, K, camera_T_world, initial, lines, options_);
       if (traced != nullptr) traced->rounds.insert(traced->rounds.end(), fitted.rounds.begin(), fitted.rounds.end());
       const FitResult& fit = fitted.fit;
@@ -1282,6 +1286,32 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
     if (failed) continue;
     verify(entry.model, fit, traced);
+  }
+
+  // Other models at each candidate's place (the candidates of the passes above only): where the
+  // block's own model was lost at its hypotheses or fit, a wrong model fitted onto it would otherwise
+  // stand unopposed in the selection.
+  for (size_t c = 0, first_pass = candidates.size(); c < first_pass && options_.max_alternative_fits > 0;
+       ++c) {
+    const int candidate_model = candidates[c].model;
+    const geometry::Pose3 world_T_candidate = world_T_camera * candidates[c].camera_T_object;
+    int fitted = 0;
+    for (const SupportHypothesis& h :
+         AlternativeHypotheses(models_, camera, detection, candidate_model, world_T_candidate, options_)) {
+      if (fitted >= options_.max_alternative_fits) break;
+      const geometry::Pose3 initial = camera.camera_T_world() * h.world_T_object;
+      if (already_tried(h.model, initial)) continue;
+      ++fitted;
+      const Model& model = models_.models[static_cast<size_t>(h.model)];
+      RecognitionTrace::Fitted* traced = start_trace(h.model, kAlternativeKind, initial);
+      const HypothesisFit fit =
+          FitSupportHypothesis(model, K, camera.camera_T_world(), initial, lines, options_);
+      if (traced != nullptr) {
+        traced->rounds.insert(traced->rounds.end(), fit.rounds.begin(), fit.rounds.end());
+        traced->camera_T_object = fit.fit.camera_T_object;
+      }
+      if (!fit.failed) verify(h.model, fit.fit, traced);
+    }
   }
   const auto t4 = Clock::now();
 

@@ -63,6 +63,19 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
   return static_cast<double>(supported) / count;
 }
 
+// A placement's edge support as the support hypotheses score it: coarse samples first (most poses
+// are wrong and show it anywhere along their outline; the coarse threshold was 0.2 under the fine
+// one: at 0.05 under it, the same blocks are found on the renders of seeds 7-9 and the support-plane
+// stage takes 12 ms per image instead of 19), then every 3 px. Below options.support_min_score: -1.
+double PlacementSupport(const Eigen::Vector3d& size_m, const Camera& camera,
+                        const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
+                        const RecognizerOptions& options) {
+  const double coarse_min = options.support_min_score - 0.05;
+  if (QuickSupport(size_m, camera, camera_T_object, edge_map, 12, coarse_min) < coarse_min) return -1;
+  const double score = QuickSupport(size_m, camera, camera_T_object, edge_map, 3, options.support_min_score);
+  return score >= options.support_min_score ? score : -1;
+}
+
 // Equal poses of a box up to its symmetries (SymmetricRotationAngle: the signs of its axes, and
 // quarter turns about an axis whose other two sides are equal), for thinning: a corner of a block
 // with a square face gives each pose twice, with the two equal axes swapped.
@@ -260,13 +273,8 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     h.world_T_object = geometry::Pose3(Eigen::Quaterniond(rotation).normalized(), middle);
     const geometry::Pose3 camera_T_object = camera_T_world * h.world_T_object;
     if (!(camera_T_object.translation.z() > 0.05)) return;
-    // Coarse samples first (most poses are wrong and show it anywhere along their outline). The
-    // coarse threshold was 0.2 under the fine one: at 0.05 under it, the same blocks are found on the
-    // renders of seeds 7-9 and the support-plane stage takes 12 ms per image instead of 19.
-    const double coarse_min = options.support_min_score - 0.05;
-    if (QuickSupport(s, camera, camera_T_object, detection.edge_map, 12, coarse_min) < coarse_min) return;
-    h.score = QuickSupport(s, camera, camera_T_object, detection.edge_map, 3, options.support_min_score);
-    if (h.score < options.support_min_score) return;
+    h.score = PlacementSupport(s, camera, camera_T_object, detection.edge_map, options);
+    if (h.score < 0) return;
     h.corner = corner_index;
     h.plane = plane_index;
     all.push_back(h);
@@ -350,6 +358,69 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     if (!repeat) kept.push_back(h);
   }
   return kept;
+}
+
+std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models, const Camera& camera,
+                                                     const LineDetection& detection, int model_index,
+                                                     const geometry::Pose3& world_T_object,
+                                                     const RecognizerOptions& options) {
+  std::vector<SupportHypothesis> out;
+  const Eigen::Vector3d& size = models.models[static_cast<size_t>(model_index)].box_size_m;
+  const Eigen::Matrix3d R = world_T_object.RotationMatrix();
+  // At rest: one axis within the editor's tilt of the vertical.
+  int up = -1;
+  for (int k = 0; k < 3; ++k) {
+    if (std::abs(R.col(k).z()) > std::cos(options.table_snap_max_tilt_deg * M_PI / 180)) up = k;
+  }
+  if (up < 0) return out;
+  const int i = (up + 1) % 3, j = (up + 2) % 3;
+  Eigen::Vector3d h[2] = {R.col(i), R.col(j)};
+  for (Eigen::Vector3d& v : h) v = Eigen::Vector3d(v.x(), v.y(), 0).normalized();
+  const double half[2] = {0.5 * size[i], 0.5 * size[j]};
+  const Eigen::Vector3d bottom_centre =
+      world_T_object.translation - Eigen::Vector3d::UnitZ() * 0.5 * size[up];
+  const geometry::Pose3& camera_T_world = camera.camera_T_world();
+  for (size_t m = 0; m < models.models.size(); ++m) {
+    const Eigen::Vector3d& s = models.models[m].box_size_m;
+    SupportHypothesis best;
+    best.score = -1;
+    for (int corner = 0; corner < 4; ++corner) {
+      const double sign[2] = {corner & 1 ? 1.0 : -1.0, corner & 2 ? 1.0 : -1.0};
+      const Eigen::Vector3d anchor = bottom_centre + sign[0] * half[0] * h[0] + sign[1] * half[1] * h[1];
+      for (int b_up = 0; b_up < 3; ++b_up) {
+        for (int swap = 0; swap < 2; ++swap) {
+          const int a0 = swap ? (b_up + 2) % 3 : (b_up + 1) % 3, a1 = swap ? (b_up + 1) % 3 : (b_up + 2) % 3;
+          // The box from the anchor inwards along both horizontal axes, up from the plane.
+          const Eigen::Vector3d centre = anchor - sign[0] * 0.5 * s[a0] * h[0] -
+                                         sign[1] * 0.5 * s[a1] * h[1] +
+                                         Eigen::Vector3d::UnitZ() * 0.5 * s[b_up];
+          Eigen::Matrix3d rotation;
+          rotation.col(a0) = h[0];
+          rotation.col(a1) = h[1];
+          rotation.col(b_up) = Eigen::Vector3d::UnitZ();
+          if (rotation.determinant() < 0) rotation.col(b_up) = -rotation.col(b_up);
+          // The recognized pose itself (same model, same extent) is no alternative.
+          if (static_cast<int>(m) == model_index &&
+              (centre - (bottom_centre + Eigen::Vector3d::UnitZ() * 0.5 * size[up])).norm() < 1e-3 &&
+              std::abs(s[a0] - size[i]) < 1e-6 && std::abs(s[a1] - size[j]) < 1e-6) {
+            continue;
+          }
+          const geometry::Pose3 pose(Eigen::Quaterniond(rotation).normalized(), centre);
+          const geometry::Pose3 camera_T_object = camera_T_world * pose;
+          if (!(camera_T_object.translation.z() > 0.05)) continue;
+          const double score = PlacementSupport(s, camera, camera_T_object, detection.edge_map, options);
+          if (score < 0 || score <= best.score) continue;
+          best.model = static_cast<int>(m);
+          best.world_T_object = pose;
+          best.score = score;
+        }
+      }
+    }
+    if (best.score >= 0) out.push_back(best);
+  }
+  std::stable_sort(out.begin(), out.end(),
+                   [](const SupportHypothesis& a, const SupportHypothesis& b) { return a.score > b.score; });
+  return out;
 }
 
 }  // namespace teachsim::vision

@@ -186,6 +186,11 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o.max_support_hypotheses = 0;
   EXPECT_NE(o.Validate().message().find("max_support_hypotheses"), std::string::npos);
   o = RecognizerOptions();
+  o.max_alternative_fits = -1;
+  EXPECT_NE(o.Validate().message().find("max_alternative_fits = -1 must be >= 0"), std::string::npos);
+  o.max_alternative_fits = 0;  // none: valid
+  EXPECT_TRUE(o.Validate().ok());
+  o = RecognizerOptions();
   o.accept_evidence_score = 0.1;  // below min_evidence_score
   EXPECT_NE(o.Validate().message().find("accept_evidence_score = 0.1 must be >= min_evidence_score"),
             std::string::npos)
@@ -465,6 +470,74 @@ TEST(RecognizerTest, TheSupportSourceCanBeSwitchedOff) {
       EXPECT_EQ(trace.corners, 0);
       EXPECT_EQ(support_fits, 0);
     }
+  }
+}
+
+// Other models at a candidate's place: a cube laid on one end of a rendered bar (sharing a bottom
+// corner and the bar's yaw) has the bar where it really stands among its alternatives, best
+// supported; the cube itself is none of them; a pose not at rest has none.
+TEST(AlternativeHypothesesTest, ACubeOnOneEndOfABarHasTheBarAmongItsAlternatives) {
+  const Camera camera = SyntheticCamera();
+  const ModelLibrary library{{Cube(), Bar()}};
+  const RecognizerOptions options;
+  for (const double yaw : {-0.3, 0.45, 1.2}) {
+    const geometry::Pose3 bar = OnTable(Bar().box_size_m, 0.03, -0.02, yaw);
+    const cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar}}, 13);
+    const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+    // The cube on the bar's +x end: its centre 22.5 mm from the bar's end along the bar's x axis.
+    geometry::Pose3 cube = bar;
+    cube.translation = bar * Eigen::Vector3d(0.045 - 0.0225, 0, 0);
+    const std::vector<SupportHypothesis> alternatives =
+        AlternativeHypotheses(library, camera, detection, 0, cube, options);
+    ASSERT_FALSE(alternatives.empty()) << "yaw " << yaw;
+    const SupportHypothesis& best = alternatives.front();
+    EXPECT_EQ(best.model, 1) << "yaw " << yaw;
+    EXPECT_LT((best.world_T_object.translation - bar.translation).norm(), 1e-6) << "yaw " << yaw;
+    EXPECT_LT(SymmetricRotationAngle(Bar(), best.world_T_object, bar), 1e-6) << "yaw " << yaw;
+    EXPECT_GT(best.score, 0.8);
+    for (const SupportHypothesis& h : alternatives) {
+      EXPECT_GE(h.score, options.support_min_score);
+      EXPECT_FALSE(h.model == 0 && (h.world_T_object.translation - cube.translation).norm() < 1e-3);
+    }
+    // Tilted by 20 degrees about a horizontal axis: not at rest, no alternatives.
+    geometry::Pose3 tilted = cube;
+    tilted.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(0.35, Eigen::Vector3d::UnitX())) * cube.rotation;
+    EXPECT_TRUE(AlternativeHypotheses(library, camera, detection, 0, tilted, options).empty());
+  }
+}
+
+// In the recognizer: every candidate's alternatives are fitted and verified like any hypothesis
+// (trace kind kAlternativeKind) unless max_alternative_fits is 0; the rendered bar is found either way.
+TEST(RecognizerTest, AlternativesAreFittedUnlessSwitchedOff) {
+  const Camera camera = SyntheticCamera();
+  const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0.04, -0.03, 0.5);
+  const cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar_pose}}, 9);
+  for (const int alternatives : {2, 0}) {
+    RecognizerOptions options = SmallIndexOptions();
+    options.max_alternative_fits = alternatives;
+    auto recognizer = Recognizer::Create({{Cube(), Bar()}}, options, "");
+    ASSERT_TRUE(recognizer.ok());
+    RecognitionTrace trace;
+    auto result = recognizer->Recognize(image, camera, nullptr, &trace);
+    ASSERT_TRUE(result.ok());
+    int alternative_fits = 0, candidates = 0;
+    for (const RecognitionTrace::Fitted& f : trace.fitted) {
+      if (f.group_kind == kAlternativeKind) {
+        ++alternative_fits;
+      } else if (f.outcome == RecognitionTrace::Outcome::kCandidate) {
+        ++candidates;
+      }
+    }
+    if (alternatives == 0) {
+      EXPECT_EQ(alternative_fits, 0);
+    } else {
+      EXPECT_GT(alternative_fits, 0);
+      EXPECT_LE(alternative_fits, alternatives * candidates);
+    }
+    // Either way the bar is found where it stands (its own hypotheses are there too).
+    ASSERT_EQ(result->objects.size(), 1u);
+    EXPECT_EQ(result->objects[0].model, "bar90");
+    EXPECT_LT((result->objects[0].raw_world_T_object.translation - bar_pose.translation).norm(), 0.003);
   }
 }
 

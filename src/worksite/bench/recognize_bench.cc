@@ -20,7 +20,8 @@
 // commas (see ApplyAblation: no-support, plane-only, no-polish, rules-only, index-N, support-N,
 // contrast-X, score-X, evidence-X, accept-X, below-MM, canny-X (both thresholds times X), cannylow-X,
 // cannyhigh-X, checks-N, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX,
-// stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX).
+// stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX, alternatives-N (0: no other models
+// fitted at the candidates' places).
 // For teachsim, every scored object is put down to the stage that lost it
 // (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
@@ -465,12 +466,16 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"stepshare", [o](double v) { o->min_step_share = v; }},
       {"stepgrey", [o](double v) { o->min_step_grey = v; }},
       {"stepoffset", [o](double v) { o->step_offset_px = v; }},
+      {"alternatives", [o](double v) { o->max_alternative_fits = static_cast<int>(v); }},
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, rules-only, index-N, support-N, contrast-X, "
-           "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, checks-N, neighbours-N, "
-           "queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, stepgrey-X, stepoffset-PX)";
+           "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, checks-N, "
+           "neighbours-N, "
+           "queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, stepgrey-X, "
+           "stepoffset-PX, "
+           "alternatives-N)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);

@@ -64,6 +64,10 @@ LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& came
 // ---- item 2: perceptual groups.
 enum class GroupKind : uint8_t { kChain3 = 0, kChain4 = 1, kFork3 = 2 };
 inline constexpr int kGroupKinds = 3;
+// RecognitionTrace::Fitted::group_kind of the hypotheses that come from no group: a support-plane
+// hypothesis (SupportHypotheses) and another model at a candidate's place (AlternativeHypotheses).
+inline constexpr int kSupportKind = kGroupKinds;
+inline constexpr int kAlternativeKind = kGroupKinds + 1;
 int GroupSegments(GroupKind kind);   // 3, 4, 3
 int GroupDimension(GroupKind kind);  // length of the index vector: 4, 6, 4
 // A group's geometry. Chains: points[0..n] along the chain (points[0] and points[n] are the free
@@ -232,6 +236,18 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
                                                  const std::vector<ImageCorner>& corners,
                                                  const std::vector<SupportPlane>& planes,
                                                  const RecognizerOptions& options);
+
+// Other models at a candidate's place: a wrong model fitted onto a real block (a plate on a slab, a
+// cube on one end of a bar) shares a bottom corner and the directions of its horizontal edges with
+// the real block. For a pose at rest (an axis within options.table_snap_max_tilt_deg of the
+// vertical), every model of the library on each of its faces, anchored at each of the pose's four
+// bottom corners and reaching inwards from it along the same horizontal directions, scored by edge
+// support (coarse samples first, as SupportHypotheses): the best placement per model with score >=
+// options.support_min_score, the pose itself left out, best first. Nothing for a pose not at rest.
+std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models, const Camera& camera,
+                                                     const LineDetection& detection, int model_index,
+                                                     const geometry::Pose3& world_T_object,
+                                                     const RecognizerOptions& options);
 
 // ---- item 5: the evidence for a pose (what verification decides on).
 // The known fixed world's visible edges in the (distorted) image: a block's predicted edge lying
