@@ -374,8 +374,9 @@ std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models,
   }
   if (up < 0) return out;
   const int i = (up + 1) % 3, j = (up + 2) % 3;
-  Eigen::Vector3d h[2] = {R.col(i), R.col(j)};
-  for (Eigen::Vector3d& v : h) v = Eigen::Vector3d(v.x(), v.y(), 0).normalized();
+  // Its horizontal edge directions, levelled and made perpendicular (the pose may tilt a little).
+  Eigen::Vector3d h[2] = {Eigen::Vector3d(R(0, i), R(1, i), 0).normalized(), Eigen::Vector3d(R(0, j), R(1, j), 0)};
+  h[1] = (h[1] - h[1].dot(h[0]) * h[0]).normalized();
   const double half[2] = {0.5 * size[i], 0.5 * size[j]};
   const Eigen::Vector3d bottom_centre =
       world_T_object.translation - Eigen::Vector3d::UnitZ() * 0.5 * size[up];
