@@ -472,10 +472,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, rules-only, index-N, support-N, contrast-X, "
            "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, checks-N, "
-           "neighbours-N, "
-           "queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, stepgrey-X, "
-           "stepoffset-PX, "
-           "alternatives-N)";
+           "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
+           "stepgrey-X, stepoffset-PX, alternatives-N)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);
