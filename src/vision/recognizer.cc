@@ -81,6 +81,9 @@ Status RecognizerOptions::Validate() const {
   }
   if (!(min_step_grey >= 0)) return Status::InvalidInput("RecognizerOptions::min_step_grey must be >= 0");
   TEACHSIM_RETURN_IF_ERROR(positive("max_reprojection_rms_px", max_reprojection_rms_px));
+  TEACHSIM_RETURN_IF_ERROR(positive("refit_max_rms_px", refit_max_rms_px));
+  TEACHSIM_RETURN_IF_ERROR(fraction("refit_min_coverage", refit_min_coverage));
+  TEACHSIM_RETURN_IF_ERROR(fraction("refit_accept_score", refit_accept_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_evidence_score", min_evidence_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("accept_evidence_score", accept_evidence_score));
   if (accept_evidence_score < min_evidence_score) {
@@ -504,6 +507,12 @@ void ForEachOutlineSample(const Eigen::Vector3d& box_size_m, const geometry::Pos
   }
 }
 
+// The step rule (RecognizerOptions::min_step_share): the supported outline is mostly a step in grey
+// level between two surfaces, not a thin line.
+bool StepRule(const PoseEvidence& e, const RecognizerOptions& options) {
+  return e.step_supported_px >= options.min_step_share * e.supported_px;
+}
+
 // The ranking of the non-maximum suppression: supported length less the unsupported length of the
 // predicted outline, so that of two poses explaining the same image edges the one that predicts less
 // outline where the image shows nothing (an upright slab over a cube and the table) comes first. By
@@ -751,6 +760,32 @@ struct FixedPart {
   std::vector<Eigen::Vector3d> normals, edge_dirs;
 };
 
+// Whether every corner of the box projects into the image: a block cut by the image border shows
+// only part of its outline, and what is left says too little for the edge-point refit.
+bool InImageWhole(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object) {
+  for (int i = 0; i < 8; ++i) {
+    const auto px = camera.ProjectFromCamera(camera_T_object * BoxVertex(model.box_size_m, i));
+    if (!px || !camera.InImage(*px)) return false;
+  }
+  return true;
+}
+
+double LowestZ(const Model& model, const geometry::Pose3& world_T_object) {
+  double z = 1e9;
+  for (const Eigen::Vector3d& v : BoxWorldVertices(model, world_T_object)) z = std::min(z, v.z());
+  return z;
+}
+
+// Whether a pose rests on the table as the model editor would put it there: its lowest point within
+// table_snap_distance_m of the table top and one of its faces within table_snap_max_tilt_deg of level.
+bool RestsOnTable(const Model& model, const geometry::Pose3& world_T_object, double table_top_z,
+                  const RecognizerOptions& options) {
+  const Eigen::Matrix3d rotation = world_T_object.RotationMatrix();
+  const double up = rotation.row(2).cwiseAbs().maxCoeff();  // cosine of the most vertical axis' tilt
+  return std::abs(LowestZ(model, world_T_object) - table_top_z) <= options.table_snap_distance_m &&
+         up >= std::cos(options.table_snap_max_tilt_deg * M_PI / 180);
+}
+
 Penetration PartPenetration(const Model& model, const geometry::Pose3& world_T_object, const FixedPart& part,
                             bool horizontal_only) {
   std::vector<Eigen::Vector3d> axes = part.normals;
@@ -873,6 +908,25 @@ double EvidenceScore(const PoseEvidence& e) {
                    3.7323 * e.free_support_fraction + 5.8348 * e.free_coverage + 1.1887 * e.polarity -
                    0.4480 * edges_supported_fraction - 0.4147 * e.edges_visible + 1.2771 * e.edges_supported;
   return 1 / (1 + std::exp(-z));
+}
+
+std::optional<PolishResult> RefitOnEdgePoints(const Model& model, const Camera& camera,
+                                              const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
+                                              double table_top_z, const RecognizerOptions& options) {
+  // The polish moves the outline by at most 2 px: a pose far from resting on the table will not
+  // come to rest there, and is not polished at all (twice the editor's tolerances).
+  RecognizerOptions loose = options;
+  loose.table_snap_distance_m *= 2;
+  loose.table_snap_max_tilt_deg *= 2;
+  if (!RestsOnTable(model, camera.world_T_camera() * camera_T_object, table_top_z, loose))
+    return std::nullopt;
+  const PolishResult polished = PolishPose(model, camera, camera_T_object, edge_map, false);
+  if (!polished.ok || polished.rms_px > options.refit_max_rms_px ||
+      !InImageWhole(model, camera, polished.fit.camera_T_object) ||
+      !RestsOnTable(model, camera.world_T_camera() * polished.fit.camera_T_object, table_top_z, options)) {
+    return std::nullopt;
+  }
+  return polished;
 }
 
 const char* LossStageName(LossStage stage) {
@@ -1124,24 +1178,27 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     auto reject = [&](Outcome outcome) {
       if (traced != nullptr) traced->outcome = outcome;
     };
-    const EdgeMatchSet set = MatchEdges(model, K, fit.camera_T_object, lines, options_.match_distance_px, match_angle);
+    EdgeMatchSet set =
+        MatchEdges(model, K, fit.camera_T_object, lines, options_.match_distance_px, match_angle);
     if (set.matched_fraction < options_.min_matched_edge_fraction) {
       reject(Outcome::kMatchedFraction);
       return;
     }
     // Culling (§7.1): outside the work site, under the table, inside a fixed object.
-    const geometry::Pose3 world_T_object = world_T_camera * fit.camera_T_object;
-    if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m)
-      return reject(Outcome::kImplausible);
-    double zmin = 1e9;
-    for (const Eigen::Vector3d& v : BoxWorldVertices(model, world_T_object)) zmin = std::min(zmin, v.z());
-    if (zmin < table_top_z - options_.below_table_tolerance_m) return reject(Outcome::kImplausible);
-    for (const FixedPart& part : fixed_parts) {
-      if (PartPenetration(model, world_T_object, part, false).depth_m > std::max(0.005, 0.2 * model.box_size_m.minCoeff())) {
-        return reject(Outcome::kImplausible);
+    auto implausible = [&](const geometry::Pose3& camera_T_object) {
+      const geometry::Pose3 world_T_object = world_T_camera * camera_T_object;
+      if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m) return true;
+      if (LowestZ(model, world_T_object) < table_top_z - options_.below_table_tolerance_m) return true;
+      for (const FixedPart& part : fixed_parts) {
+        if (PartPenetration(model, world_T_object, part, false).depth_m >
+            std::max(0.005, 0.2 * model.box_size_m.minCoeff())) {
+          return true;
+        }
       }
-    }
-    const PoseEvidence evidence =
+      return false;
+    };
+    if (implausible(fit.camera_T_object)) return reject(Outcome::kImplausible);
+    PoseEvidence evidence =
         ComputeEvidence(model, camera, fit.camera_T_object, detection, &fixed_edges, options_, set);
     // The rules after the matched share: the RMS of all matched segments against the final pose, or,
     // when only the segments closest to each predicted edge are within the limit (a shadow or grain
@@ -1149,34 +1206,69 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     // edges running on past its corners (a wrong, smaller model fitted onto part of a real block);
     // edge support; not part of a larger straight-edged thing (a cube fitted onto a bar, an upright
     // block onto the dark cylinder: image edges run on past two or more of its corners for most of
-    // the edge's length while little of its own outline is supported).
-    const bool trimmed_rms = evidence.rms_px > options_.max_reprojection_rms_px;
-    fit.rms_px = trimmed_rms ? std::min(evidence.rms_px, evidence.rms_closest_px) : evidence.rms_px;
-    Outcome rule = Outcome::kCandidate;
-    if (fit.rms_px > options_.max_reprojection_rms_px) {
-      rule = Outcome::kReprojection;
-    } else if (evidence.support_fraction < options_.min_score || evidence.coverage < options_.min_coverage ||
-               (trimmed_rms && (evidence.matched_fraction < kTrimmedMinMatchedFraction ||
-                                evidence.coverage < kTrimmedMinCoverage ||
-                                evidence.continued_ends > kTrimmedMaxContinuedEnds)) ||
-               (evidence.long_continued_ends >= kPartMinContinuedEnds &&
-                evidence.coverage < kPartMaxCoverage)) {
-      rule = Outcome::kSupport;
+    // the edge's length while little of its own outline is supported). Then the step rule and the
+    // evidence score (below). The verdict: kCandidate or why not.
+    auto judge = [&](const PoseEvidence& e, double* rms_px) {
+      const bool trimmed_rms = e.rms_px > options_.max_reprojection_rms_px;
+      *rms_px = trimmed_rms ? std::min(e.rms_px, e.rms_closest_px) : e.rms_px;
+      Outcome rule = Outcome::kCandidate;
+      if (*rms_px > options_.max_reprojection_rms_px) {
+        rule = Outcome::kReprojection;
+      } else if (e.support_fraction < options_.min_score || e.coverage < options_.min_coverage ||
+                 (trimmed_rms &&
+                  (e.matched_fraction < kTrimmedMinMatchedFraction || e.coverage < kTrimmedMinCoverage ||
+                   e.continued_ends > kTrimmedMaxContinuedEnds)) ||
+                 (e.long_continued_ends >= kPartMinContinuedEnds && e.coverage < kPartMaxCoverage)) {
+        rule = Outcome::kSupport;
+      }
+      // Outline along thin lines: where most of the supported outline is a thin line (wood grain
+      // inside a face, a scratch) and not a step in grey level between two surfaces, the pose is a
+      // wrong model laid onto a block's texture, whatever the rest of its evidence.
+      if (!StepRule(e, options_)) return Outcome::kSupport;
+      // The evidence score over all of it (EvidenceScore): required of a pose that passes the rules,
+      // and enough on its own when it is high.
+      const double score = EvidenceScore(e);
+      if (rule == Outcome::kCandidate) return score < options_.min_evidence_score ? Outcome::kEvidence : rule;
+      return score < options_.accept_evidence_score ? rule : Outcome::kCandidate;
+    };
+    Outcome outcome = judge(evidence, &fit.rms_px);
+    // A second chance, the edge-point refit (RecognizerOptions::edge_point_refit), for a pose whose
+    // matched lines are off its predicted edges: often a grain line or a shadow beside an edge was
+    // matched with it. The image's own edge points along the outline have no such neighbours. A pose
+    // that fits them closely while resting on the table is judged again on them, its RMS theirs, and
+    // accepted only with a strong evidence score. Refitted only when it could reach that score at all
+    // (its score with no residual) and its outline is supported well enough otherwise.
+    if (outcome != Outcome::kCandidate && options_.edge_point_refit &&
+        evidence.rms_px > options_.max_reprojection_rms_px &&
+        evidence.coverage >= options_.refit_min_coverage && evidence.support_fraction >= options_.min_score &&
+        StepRule(evidence, options_)) {
+      PoseEvidence best = evidence;
+      best.rms_px = best.rms_closest_px = 0;
+      const std::optional<PolishResult> polished =
+          EvidenceScore(best) >= options_.refit_accept_score
+              ? RefitOnEdgePoints(model, camera, fit.camera_T_object, detection.edge_map, table_top_z,
+                                  options_)
+              : std::nullopt;
+      if (polished && !implausible(polished->fit.camera_T_object)) {
+        EdgeMatchSet refit_set = MatchEdges(model, K, polished->fit.camera_T_object, lines,
+                                            options_.match_distance_px, match_angle);
+        PoseEvidence refit_evidence = ComputeEvidence(model, camera, polished->fit.camera_T_object, detection,
+                                                      &fixed_edges, options_, refit_set);
+        refit_evidence.rms_px = refit_evidence.rms_closest_px = polished->rms_px;
+        double rms_px = 0;
+        if (refit_set.matched_fraction >= options_.min_matched_edge_fraction &&
+            judge(refit_evidence, &rms_px) == Outcome::kCandidate &&
+            EvidenceScore(refit_evidence) >= options_.refit_accept_score) {
+          fit = polished->fit;
+          fit.rms_px = rms_px;
+          set = std::move(refit_set);
+          evidence = refit_evidence;
+          outcome = Outcome::kCandidate;
+          if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
+        }
+      }
     }
-    // Outline along thin lines: where most of the supported outline is a thin line (wood grain
-    // inside a face, a scratch) and not a step in grey level between two surfaces, the pose is a
-    // wrong model laid onto a block's texture, whatever the rest of its evidence.
-    if (evidence.step_supported_px < options_.min_step_share * evidence.supported_px) {
-      return reject(Outcome::kSupport);
-    }
-    // The evidence score over all of it (EvidenceScore): required of a pose that passes the rules,
-    // and enough on its own when it is high.
-    const double score = EvidenceScore(evidence);
-    if (rule == Outcome::kCandidate ? score < options_.min_evidence_score
-                                    : score < options_.accept_evidence_score) {
-      reject(rule == Outcome::kCandidate ? Outcome::kEvidence : rule);
-      return;
-    }
+    if (outcome != Outcome::kCandidate) return reject(outcome);
     reject(Outcome::kCandidate);
     Candidate c;
     c.trace_index = traced != nullptr ? static_cast<int>(trace->fitted.size()) - 1 : -1;
@@ -1422,11 +1514,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     Recognition& r = result.objects[k];
     const Model& model = *std::find_if(models_.models.begin(), models_.models.end(),
                                        [&](const Model& m) { return m.name == r.model; });
-    auto lowest = [&]() {
-      double z = 1e9;
-      for (const Eigen::Vector3d& v : BoxWorldVertices(model, r.world_T_object)) z = std::min(z, v.z());
-      return z;
-    };
+    auto lowest = [&]() { return LowestZ(model, r.world_T_object); };
     if (lowest() - table_top_z > options_.table_snap_distance_m) continue;
     // Level a nearly flat face (the object cannot rest on the table tilted by a few degrees).
     const Eigen::Matrix3d rot = r.world_T_object.RotationMatrix();

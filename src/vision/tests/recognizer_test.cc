@@ -153,6 +153,62 @@ TEST(PoseFitTest, PolishOnEdgePointsRecoversAPoseOnTheTable) {
   EXPECT_FALSE(PolishPose(bar, camera, camera.camera_T_world() * elsewhere, detection.edge_map, true).ok);
 }
 
+// Verification's edge-point refit: from a pose 1.2 mm and 1 deg off (as a line fit pulled by a grain
+// line beside an edge leaves it), the 6-DOF fit on the edge points comes back onto the rendered block;
+// it is refused for a block lifted off the table, for one that the image border cuts, and where the
+// image shows no block.
+TEST(PoseFitTest, TheEdgePointRefitAcceptsOnlyAWholeBlockOnTheTable) {
+  const Camera camera = SyntheticCamera();
+  const Model bar = Bar();
+  const RecognizerOptions options;
+  const geometry::Pose3 truth = OnTable(bar.box_size_m, 0.02, -0.01, 0.4);
+  const cv::Mat image = RenderBoxes(camera, {{bar.box_size_m, truth}}, 13);
+  const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+  const geometry::Pose3 off = geometry::Pose3::FromAxisAngle(
+      Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), 1 * M_PI / 180, Eigen::Vector3d(0.001, -0.0006, 0.0004));
+  const geometry::Pose3 start = geometry::Pose3(truth.rotation, Eigen::Vector3d::Zero()) * off;
+  const geometry::Pose3 world_T_start(start.rotation, truth.translation + start.translation);
+  const std::optional<PolishResult> refit =
+      RefitOnEdgePoints(bar, camera, camera.camera_T_world() * world_T_start, detection.edge_map, 0, options);
+  ASSERT_TRUE(refit.has_value());
+  const geometry::Pose3 world_T_bar = camera.world_T_camera() * refit->fit.camera_T_object;
+  double reprojection_px = 0;  // mean over the corners (6 DOF: the depth along the ray is the weak part)
+  for (int i = 0; i < 8; ++i) {
+    reprojection_px += (*camera.Project(world_T_bar * BoxVertex(bar.box_size_m, i)) -
+                        *camera.Project(truth * BoxVertex(bar.box_size_m, i)))
+                           .norm() /
+                       8;
+  }
+  EXPECT_LT(reprojection_px, 0.3);
+  EXPECT_LT(SymmetricRotationAngle(bar, world_T_bar, truth), 0.3 * M_PI / 180);
+  EXPECT_LT(refit->rms_px, options.refit_max_rms_px);
+  // The same block 3 cm above the table (its image drawn there): not at rest.
+  const geometry::Pose3 lifted(truth.rotation, truth.translation + Eigen::Vector3d(0, 0, 0.03));
+  const cv::Mat lifted_image = RenderBoxes(camera, {{bar.box_size_m, lifted}}, 13);
+  EXPECT_FALSE(RefitOnEdgePoints(bar, camera, camera.camera_T_world() * lifted,
+                                 DetectLinesAndEdges(lifted_image, camera, options).edge_map, 0, options)
+                   .has_value());
+  EXPECT_TRUE(RefitOnEdgePoints(bar, camera, camera.camera_T_world() * lifted,
+                                DetectLinesAndEdges(lifted_image, camera, options).edge_map, 0.03, options)
+                  .has_value())
+      << "on a support 3 cm high it rests";
+  // A block whose far end is outside the image (the image's left border cuts it).
+  geometry::Pose3 at_border = truth;
+  while (camera.Project(at_border * BoxVertex(bar.box_size_m, 0))->x() > -20 &&
+         camera.Project(at_border.translation)->x() > 25) {
+    at_border.translation += Eigen::Vector3d(-0.004, -0.004, 0);  // towards the image's left
+  }
+  const cv::Mat border_image = RenderBoxes(camera, {{bar.box_size_m, at_border}}, 13);
+  EXPECT_FALSE(RefitOnEdgePoints(bar, camera, camera.camera_T_world() * at_border,
+                                 DetectLinesAndEdges(border_image, camera, options).edge_map, 0, options)
+                   .has_value());
+  // Where the image shows nothing.
+  const geometry::Pose3 elsewhere = OnTable(bar.box_size_m, -0.15, 0.12, 0.4);
+  EXPECT_FALSE(
+      RefitOnEdgePoints(bar, camera, camera.camera_T_world() * elsewhere, detection.edge_map, 0, options)
+          .has_value());
+}
+
 TEST(PenetrationTest, SeparatesOverlappingBoxesByTheSmallestMove) {
   const Eigen::Vector3d size(0.045, 0.045, 0.045);
   const Penetration p = BoxBoxPenetration(size, geometry::Pose3::Translation({0.04, 0, 0}), size,
@@ -195,6 +251,15 @@ TEST(OptionsTest, ValidateNamesTheField) {
   EXPECT_NE(o.Validate().message().find("accept_evidence_score = 0.1 must be >= min_evidence_score"),
             std::string::npos)
       << o.Validate().message();
+  o = RecognizerOptions();
+  o.refit_max_rms_px = 0;
+  EXPECT_NE(o.Validate().message().find("refit_max_rms_px = 0 must be > 0"), std::string::npos);
+  o = RecognizerOptions();
+  o.refit_accept_score = 1.2;
+  EXPECT_NE(o.Validate().message().find("refit_accept_score = 1.2 must be in [0, 1]"), std::string::npos);
+  o = RecognizerOptions();
+  o.refit_min_coverage = -0.1;
+  EXPECT_NE(o.Validate().message().find("refit_min_coverage"), std::string::npos);
 }
 
 std::string WriteTemp(const std::string& name, const std::string& text) {

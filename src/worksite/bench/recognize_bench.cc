@@ -17,11 +17,12 @@
 // of random scenes; TEACHSIM_RECOGNIZE_FEATURES=FILE appends the evidence of every fitted hypothesis
 // with its truth label (see AppendFeatures; tools/fit_evidence_weights.py fits the evidence score to
 // it); TEACHSIM_RECOGNIZE_ABLATION runs the recognizer with options changed, several separated by
-// commas (see ApplyAblation: no-support, plane-only, no-polish, rules-only, index-N, support-N,
+// commas (see ApplyAblation: no-support, plane-only, no-polish, no-refit, rules-only, index-N, support-N,
 // contrast-X, score-X, evidence-X, accept-X, below-MM, canny-X (both thresholds times X), cannylow-X,
 // cannyhigh-X, checks-N, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX,
 // stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX, alternatives-N (0: no other models
-// fitted at the candidates' places).
+// fitted at the candidates' places), refitrms-PX, refitcoverage-X, refitscore-X (the edge-point refit's
+// limits; no-refit switches it off).
 // For teachsim, every scored object is put down to the stage that lost it
 // (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
@@ -438,6 +439,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "no-support") return o->support_hypotheses = false, std::nullopt;
   if (a == "plane-only") return o->support_refine_6dof = false, std::nullopt;
   if (a == "no-polish") return o->polish_pose = false, std::nullopt;
+  if (a == "no-refit") return o->edge_point_refit = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
   const std::size_t dash = a.rfind('-');
   const std::string name = dash == std::string::npos ? a : a.substr(0, dash);
@@ -467,13 +469,17 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"stepgrey", [o](double v) { o->min_step_grey = v; }},
       {"stepoffset", [o](double v) { o->step_offset_px = v; }},
       {"alternatives", [o](double v) { o->max_alternative_fits = static_cast<int>(v); }},
+      {"refitrms", [o](double v) { o->refit_max_rms_px = v; }},
+      {"refitcoverage", [o](double v) { o->refit_min_coverage = v; }},
+      {"refitscore", [o](double v) { o->refit_accept_score = v; }},
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
-    return "unknown ablation (no-support, plane-only, no-polish, rules-only, index-N, support-N, contrast-X, "
+    return "unknown ablation (no-support, plane-only, no-polish, no-refit, rules-only, index-N, support-N, "
+           "contrast-X, "
            "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, checks-N, "
            "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
-           "stepgrey-X, stepoffset-PX, alternatives-N)";
+           "stepgrey-X, stepoffset-PX, alternatives-N, refitrms-PX, refitcoverage-X, refitscore-X)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);

@@ -184,6 +184,16 @@ struct PolishResult {
 PolishResult PolishPose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                         const EdgeMap& edge_map, bool on_plane, double search_px = 3);
 
+// Verification's edge-point refit (RecognizerOptions::edge_point_refit): a fitted pose whose matched
+// lines lie off its predicted edges (a grain line or a shadow beside an edge was matched) polished in
+// 6 DOF on the image's edge points (PolishPose). The refitted pose when every corner of the box
+// projects into the image, it rests on the table (lowest point within table_snap_distance_m of
+// table_top_z, a face within table_snap_max_tilt_deg of level) and its edge points' RMS is within
+// refit_max_rms_px; nullopt otherwise.
+std::optional<PolishResult> RefitOnEdgePoints(const Model& model, const Camera& camera,
+                                              const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
+                                              double table_top_z, const RecognizerOptions& options);
+
 // ---- a second hypothesis source beside the index (paper §7.1: several groupings in parallel;
 // §4.3: objects rest on the table): a block at rest stands on one of its faces on a horizontal
 // support plane, so its pose has 3 DOF (x, y, yaw) per resting face, and one image corner (an L

@@ -102,6 +102,20 @@ struct RecognizerOptions {
   double min_step_grey = 12;
   double max_reprojection_rms_px = 1.0;      // matched segments' RMS distance to predicted edges, px (above 1 px the
                                              // dev set's recognitions were the right block but up to 2 deg off)
+  // The edge-point refit, a second chance for a pose rejected with its matched lines farther from its
+  // predicted edges than max_reprojection_rms_px (a grain line or shadow beside an edge was matched,
+  // or the edge's own line was broken up): when its outline is otherwise supported (edge support >=
+  // min_score, coverage >= refit_min_coverage, the step rule) and its evidence score could reach
+  // refit_accept_score with no residual at all, it is fitted again in 6 DOF on the image's edge points
+  // along its outline (RefitOnEdgePoints). A refitted box that lies whole in the image, rests on the
+  // table and whose edge points lie within refit_max_rms_px of its edges is judged again with that
+  // RMS and accepted when it passes the rules and scores >= refit_accept_score. Benchmark renders,
+  // seeds 7-25: 3390 -> 3427 of 3657 blocks found, false detections 55 -> 56 in 1140 images; fresh
+  // seeds 26-31: 996 -> 1004 of 1081, 26 -> 27 in 360 (docs/benchmarks.md).
+  bool edge_point_refit = true;
+  double refit_max_rms_px = 0.7;
+  double refit_min_coverage = 0.5;
+  double refit_accept_score = 0.9;
   // The evidence score (EvidenceScore, 0..1): a pose that passes the rules above needs min_evidence_score
   // (it drops most of the false poses that the rules let through); one that fails a rule is still
   // accepted at accept_evidence_score (true poses whose matched lines include a shadow or grain line
