@@ -708,6 +708,8 @@ struct Candidate {
   EdgeMatchSet matches;
   PoseEvidence evidence;
   double rms_px = 0;
+  double rank_score =
+      0;  // the evidence score the selection ranks by (of a refitted pose: with its lines' RMS)
 };
 
 // The initial pose of a hypothesis: the model view's pose turned and scaled by the 2D similarity
@@ -1232,6 +1234,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       return score < options_.accept_evidence_score ? rule : Outcome::kCandidate;
     };
     Outcome outcome = judge(evidence, &fit.rms_px);
+    double rank_score = -1;  // set by the refit
     // A second chance, the edge-point refit (RecognizerOptions::edge_point_refit), for a pose whose
     // matched lines are off its predicted edges: often a grain line or a shadow beside an edge was
     // matched with it. The image's own edge points along the outline have no such neighbours. A pose
@@ -1254,6 +1257,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
                                             options_.match_distance_px, match_angle);
         PoseEvidence refit_evidence = ComputeEvidence(model, camera, polished->fit.camera_T_object, detection,
                                                       &fixed_edges, options_, refit_set);
+        const double lines_score = EvidenceScore(refit_evidence);
         refit_evidence.rms_px = refit_evidence.rms_closest_px = polished->rms_px;
         double rms_px = 0;
         if (refit_set.matched_fraction >= options_.min_matched_edge_fraction &&
@@ -1263,6 +1267,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
           fit.rms_px = rms_px;
           set = std::move(refit_set);
           evidence = refit_evidence;
+          rank_score = lines_score;
           outcome = Outcome::kCandidate;
           if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
         }
@@ -1278,6 +1283,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     c.matches = set;
     c.evidence = evidence;
     c.rms_px = fit.rms_px;
+    c.rank_score = rank_score >= 0 ? rank_score : EvidenceScore(evidence);
     for (int seg : set.segments) claimed[static_cast<size_t>(seg)] = true;
     candidates.push_back(std::move(c));
   };
@@ -1459,7 +1465,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   std::vector<double> rank(candidates.size());
   for (size_t i = 0; i < order.size(); ++i) {
     order[i] = i;
-    rank[i] = NetSupportPx(candidates[i].evidence) * EvidenceScore(candidates[i].evidence);
+    rank[i] = NetSupportPx(candidates[i].evidence) * candidates[i].rank_score;
   }
   order = supported_subset(order);
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return rank[a] > rank[b]; });

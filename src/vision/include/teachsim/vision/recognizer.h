@@ -109,9 +109,10 @@ struct RecognizerOptions {
   // refit_accept_score with no residual at all, it is fitted again in 6 DOF on the image's edge points
   // along its outline (RefitOnEdgePoints). A refitted box that lies whole in the image, rests on the
   // table and whose edge points lie within refit_max_rms_px of its edges is judged again with that
-  // RMS and accepted when it passes the rules and scores >= refit_accept_score. Benchmark renders,
-  // seeds 7-25: 3390 -> 3427 of 3657 blocks found, false detections 55 -> 56 in 1140 images; fresh
-  // seeds 26-31: 996 -> 1004 of 1081, 26 -> 27 in 360 (docs/benchmarks.md).
+  // RMS and accepted when it passes the rules and scores >= refit_accept_score (the selection ranks
+  // it by its score with its lines' RMS, as any other pose). Benchmark renders, seeds 7-25: 3390 ->
+  // 3425 of 3657 blocks found, false detections 55 -> 57 in 1140 images; fresh seeds 26-31: 996 ->
+  // 1005 of 1081, 26 -> 26 in 360 (docs/benchmarks.md).
   bool edge_point_refit = true;
   double refit_max_rms_px = 0.7;
   double refit_min_coverage = 0.5;
