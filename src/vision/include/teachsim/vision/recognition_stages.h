@@ -189,7 +189,8 @@ PolishResult PolishPose(const Model& model, const Camera& camera, const geometry
 // 6 DOF on the image's edge points (PolishPose). The refitted pose when every corner of the box
 // projects into the image, it rests on the table (lowest point within table_snap_distance_m of
 // table_top_z, a face within table_snap_max_tilt_deg of level) and its edge points' RMS is within
-// refit_max_rms_px; nullopt otherwise.
+// refit_max_rms_px; nullopt otherwise (without polishing when the pose is not within twice those
+// tolerances of resting on the table to begin with: the polish moves the outline by 2 px at most).
 std::optional<PolishResult> RefitOnEdgePoints(const Model& model, const Camera& camera,
                                               const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
                                               double table_top_z, const RecognizerOptions& options);
