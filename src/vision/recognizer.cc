@@ -778,14 +778,15 @@ double LowestZ(const Model& model, const geometry::Pose3& world_T_object) {
   return z;
 }
 
-// Whether a pose rests on the table as the model editor would put it there: its lowest point within
-// table_snap_distance_m of the table top and one of its faces within table_snap_max_tilt_deg of level.
+// Whether a pose rests on the table: its lowest point within distance_m of the table top and one of
+// its faces within tilt_deg of level (the model editor's tolerances: table_snap_distance_m and
+// table_snap_max_tilt_deg).
 bool RestsOnTable(const Model& model, const geometry::Pose3& world_T_object, double table_top_z,
-                  const RecognizerOptions& options) {
+                  double distance_m, double tilt_deg) {
   const Eigen::Matrix3d rotation = world_T_object.RotationMatrix();
   const double up = rotation.row(2).cwiseAbs().maxCoeff();  // cosine of the most vertical axis' tilt
-  return std::abs(LowestZ(model, world_T_object) - table_top_z) <= options.table_snap_distance_m &&
-         up >= std::cos(options.table_snap_max_tilt_deg * M_PI / 180);
+  return std::abs(LowestZ(model, world_T_object) - table_top_z) <= distance_m &&
+         up >= std::cos(tilt_deg * M_PI / 180);
 }
 
 Penetration PartPenetration(const Model& model, const geometry::Pose3& world_T_object, const FixedPart& part,
@@ -917,15 +918,15 @@ std::optional<PolishResult> RefitOnEdgePoints(const Model& model, const Camera& 
                                               double table_top_z, const RecognizerOptions& options) {
   // The polish moves the outline by at most 2 px: a pose far from resting on the table will not
   // come to rest there, and is not polished at all (twice the editor's tolerances).
-  RecognizerOptions loose = options;
-  loose.table_snap_distance_m *= 2;
-  loose.table_snap_max_tilt_deg *= 2;
-  if (!RestsOnTable(model, camera.world_T_camera() * camera_T_object, table_top_z, loose))
+  if (!RestsOnTable(model, camera.world_T_camera() * camera_T_object, table_top_z,
+                    2 * options.table_snap_distance_m, 2 * options.table_snap_max_tilt_deg)) {
     return std::nullopt;
+  }
   const PolishResult polished = PolishPose(model, camera, camera_T_object, edge_map, false);
   if (!polished.ok || polished.rms_px > options.refit_max_rms_px ||
       !InImageWhole(model, camera, polished.fit.camera_T_object) ||
-      !RestsOnTable(model, camera.world_T_camera() * polished.fit.camera_T_object, table_top_z, options)) {
+      !RestsOnTable(model, camera.world_T_camera() * polished.fit.camera_T_object, table_top_z,
+                    options.table_snap_distance_m, options.table_snap_max_tilt_deg)) {
     return std::nullopt;
   }
   return polished;
