@@ -64,9 +64,26 @@ EdgeMatchSet MatchEdges(const Model& model, const Eigen::Matrix3d& K, const geom
     edges.push_back({e, a, dir, {-dir.y(), dir.x()}, len});
     out.visible_length_px += len;
   }
+  if (edges.empty()) return out;
+  // A line that matches an edge lies within max_distance_px of it along at least half its own length,
+  // so it reaches into the edges' bounding box grown by that distance (and a pixel more, against
+  // rounding): every other line is passed over without testing it against each edge. Most of an
+  // image's lines are far from any one pose (the recognizer's fits call this for every round).
+  Eigen::Vector2d lo = edges.front().a, hi = edges.front().a;
+  for (const EdgeGeom& g : edges) {
+    const Eigen::Vector2d b = g.a + g.length * g.dir;
+    lo = lo.cwiseMin(g.a).cwiseMin(b);
+    hi = hi.cwiseMax(g.a).cwiseMax(b);
+  }
+  lo.array() -= max_distance_px + 1;
+  hi.array() += max_distance_px + 1;
   const double cos_max = std::cos(max_angle_rad);
   for (size_t s = 0; s < lines.size(); ++s) {
     const ImageLine& l = lines[s];
+    if (std::max(l.a.x(), l.b.x()) < lo.x() || std::min(l.a.x(), l.b.x()) > hi.x() ||
+        std::max(l.a.y(), l.b.y()) < lo.y() || std::min(l.a.y(), l.b.y()) > hi.y()) {
+      continue;
+    }
     const double len = l.Length();
     const Eigen::Vector2d ldir = (l.b - l.a) / len;
     int best = -1;

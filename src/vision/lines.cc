@@ -172,6 +172,8 @@ LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& came
   cv::Sobel(blurred, dy, CV_16S, 0, 1, 3);
   cv::Canny(dx, dy, out.edge_map.edges, options.canny_low, options.canny_high, true);
   out.edge_map.smoothed = blurred;
+  cv::dilate(out.edge_map.edges, out.edge_map.near,
+             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kEdgeNearPx + 1, 2 * kEdgeNearPx + 1)));
 
   cv::Mat fdx, fdy, magnitude;
   dx.convertTo(fdx, CV_32F);
@@ -222,6 +224,13 @@ std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::V
   // nearest pixel by floor(v + 0.5), and the unit gradient stored per edge pixel (no trigonometry).
   static const float cos_tol = static_cast<float>(std::cos(25 * M_PI / 180));
   const int cols = edge_map.edges.cols, rows = edge_map.edges.rows;
+  // Every pixel looked at below lies within max_offset_px (and a pixel of rounding) of the nearest
+  // one in x and y: where the dilated edges show none around it, there is none (most samples of a
+  // wrong pose, and the answer is the same).
+  if (edge_map.near.data != nullptr && max_offset_px < kEdgeNearPx) {
+    const int x0 = static_cast<int>(std::floor(pixel.x() + 0.5)), y0 = static_cast<int>(std::floor(pixel.y() + 0.5));
+    if (x0 >= 0 && y0 >= 0 && x0 < cols && y0 < rows && !edge_map.near.ptr<uint8_t>(y0)[x0]) return std::nullopt;
+  }
   const float nx = static_cast<float>(normal.x()), ny = static_cast<float>(normal.y());
   for (int o = 0; o <= 2 * max_offset_px; ++o) {
     const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);

@@ -8,6 +8,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -46,24 +47,43 @@ void Residuals(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K_inv_t, co
   if (J != nullptr) J->resize(m, 6);
   const Eigen::Matrix3d R = camera_T_object.RotationMatrix();
   const Eigen::Vector3d& t = camera_T_object.translation;
+  // What depends on the edge alone, once per edge (several lines match one edge; the fit's time was
+  // mostly here): its image line l and, with J, dl/d(pose).
+  struct PerEdge {
+    bool done = false, with_jacobian = false;
+    Eigen::Vector3d l;
+    double norm = 0;
+    Eigen::Matrix<double, 3, 6> dl;
+  };
+  std::array<PerEdge, 12> per_edge;
   for (size_t i = 0; i < matches.size(); ++i) {
     const LineMatch& match = matches[i];
-    const Eigen::Vector3d q1 = R * BoxVertex(size_m, kBoxEdges[static_cast<size_t>(match.edge)][0]);
-    const Eigen::Vector3d q2 = R * BoxVertex(size_m, kBoxEdges[static_cast<size_t>(match.edge)][1]);
-    const Eigen::Vector3d p1 = q1 + t, p2 = q2 + t;
-    const Eigen::Vector3d l = K_inv_t * p1.cross(p2);
-    const double norm = std::max(std::sqrt(l.x() * l.x() + l.y() * l.y()), 1e-300);
+    PerEdge& edge = per_edge[static_cast<size_t>(match.edge)];
+    if (!edge.done || (J != nullptr && !edge.with_jacobian)) {
+      const Eigen::Vector3d q1 = R * BoxVertex(size_m, kBoxEdges[static_cast<size_t>(match.edge)][0]);
+      const Eigen::Vector3d q2 = R * BoxVertex(size_m, kBoxEdges[static_cast<size_t>(match.edge)][1]);
+      const Eigen::Vector3d p1 = q1 + t, p2 = q2 + t;
+      edge.l = K_inv_t * p1.cross(p2);
+      edge.norm = std::max(std::sqrt(edge.l.x() * edge.l.x() + edge.l.y() * edge.l.y()), 1e-300);
+      edge.done = true;
+      if (J != nullptr) {
+        // dn/d(translation) = -[p2 - p1]x; dn/d(rotation) = [p2]x [q1]x - [p1]x [q2]x.
+        Eigen::Matrix<double, 3, 6> dn;
+        dn.leftCols<3>() = -Skew(p2 - p1);
+        dn.rightCols<3>() = Skew(p2) * Skew(q1) - Skew(p1) * Skew(q2);
+        edge.dl = K_inv_t * dn;
+        edge.with_jacobian = true;
+      }
+    }
+    const Eigen::Vector3d& l = edge.l;
+    const double norm = edge.norm;
     const Eigen::Vector3d ua(match.a.x(), match.a.y(), 1), ub(match.b.x(), match.b.y(), 1);
     const double ra = l.dot(ua) / norm, rb = l.dot(ub) / norm;
     const Eigen::Index row = static_cast<Eigen::Index>(2 * i);
     (*r)(row) = ra;
     (*r)(row + 1) = rb;
     if (J == nullptr) continue;
-    // dn/d(translation) = -[p2 - p1]x; dn/d(rotation) = [p2]x [q1]x - [p1]x [q2]x.
-    Eigen::Matrix<double, 3, 6> dn;
-    dn.leftCols<3>() = -Skew(p2 - p1);
-    dn.rightCols<3>() = Skew(p2) * Skew(q1) - Skew(p1) * Skew(q2);
-    const Eigen::Matrix<double, 3, 6> dl = K_inv_t * dn;
+    const Eigen::Matrix<double, 3, 6>& dl = edge.dl;
     // r = l.u / |l_xy|: dr/dl = u / |l_xy| - r l_xy / |l_xy|^2.
     const Eigen::Vector3d lxy(l.x() / (norm * norm), l.y() / (norm * norm), 0);
     J->row(row) = (ua / norm - ra * lxy).transpose() * dl;

@@ -1,9 +1,11 @@
 // Fitting hypotheses (hypothesis_fit.cc, pose_fit.cc) on synthetic cases with known answers: a
 // rendered block converges from a start 15 px and 10 deg off, a line beside an edge does not pull
-// the fit, and the analytic Jacobian's fit recovers a perturbed pose exactly.
+// the fit, and the analytic Jacobian's fit recovers a perturbed pose exactly. And the shortcuts
+// that make matching and edge support fast give the answers of testing everything.
 #include <gtest/gtest.h>
 
 #include <opencv2/imgproc.hpp>
+#include <random>
 
 #include "synthetic_scene.h"
 #include "teachsim/vision/recognition_stages.h"
@@ -233,6 +235,97 @@ TEST(HypothesisFitTest, SupportHypothesesKeepOnePosePerPlaceUpToSymmetry) {
       EXPECT_FALSE(same) << i << " repeats " << j;
     }
   }
+}
+
+// MatchEdges passes over the lines outside the predicted edges' bounding box (grown by the match
+// distance) without testing them: the matches are those of testing every line against every edge
+// by the rule (nearly parallel, both ends within the distance, overlapping by half its length; the
+// nearest edge). Lines of every kind around a bar: on its edges, beside them, across, far away.
+TEST(HypothesisFitTest, MatchEdgesFindsWhatTestingEveryLineAgainstEveryEdgeFinds) {
+  const Camera camera = SyntheticCamera();
+  const Eigen::Matrix3d K = camera.K();
+  const Model bar = Bar();
+  const geometry::Pose3 camera_T_bar = camera.camera_T_world() * OnTable(bar.box_size_m, 0.01, -0.02, 0.7);
+  std::vector<ImageLine> lines = EdgeLines(bar, K, camera_T_bar);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int i = 0; i < 3000; ++i) {
+    const ImageLine& edge = lines[static_cast<size_t>(i) % 9];
+    const Eigen::Vector2d dir = (edge.b - edge.a).normalized(), n(-dir.y(), dir.x());
+    const Eigen::Vector2d start = edge.a + (0.5 + 0.8 * u(rng)) * (edge.b - edge.a) + 12 * u(rng) * n +
+                                  (i % 3 == 0 ? Eigen::Vector2d(300 * u(rng), 300 * u(rng)) : Eigen::Vector2d::Zero());
+    const double angle = (i % 2 ? 0.15 : 1.5) * u(rng);
+    const Eigen::Vector2d d = Eigen::Rotation2Dd(angle) * dir;
+    lines.push_back({start, start + (5 + 60 * std::abs(u(rng))) * d});
+  }
+  for (const double distance : {2.0, 6.0, 18.0}) {
+    const double max_angle = 8 * M_PI / 180;
+    const EdgeMatchSet set = MatchEdges(bar, K, camera_T_bar, lines, distance, max_angle);
+    // The rule, line by line and edge by edge.
+    const uint16_t visible = VisibleBoxEdges(bar.box_size_m, camera_T_bar.Inverse().translation);
+    std::vector<int> segments, edges;
+    for (size_t s = 0; s < lines.size(); ++s) {
+      const ImageLine& l = lines[s];
+      const Eigen::Vector2d ldir = (l.b - l.a).normalized();
+      int best = -1;
+      double best_d = 1e300;
+      for (int e = 0; e < 12; ++e) {
+        if (!(visible >> e & 1)) continue;
+        const Eigen::Vector2d a = (K * (camera_T_bar * BoxVertex(bar.box_size_m, kBoxEdges[e][0]))).hnormalized();
+        const Eigen::Vector2d b = (K * (camera_T_bar * BoxVertex(bar.box_size_m, kBoxEdges[e][1]))).hnormalized();
+        const Eigen::Vector2d dir = (b - a).normalized(), n(-dir.y(), dir.x());
+        if (std::abs(ldir.dot(dir)) < std::cos(max_angle)) continue;
+        const double da = std::abs(n.dot(l.a - a)), db = std::abs(n.dot(l.b - a));
+        if (da > distance || db > distance) continue;
+        const double ta = dir.dot(l.a - a), tb = dir.dot(l.b - a);
+        if (std::min(std::max(ta, tb), (b - a).norm()) - std::max(std::min(ta, tb), 0.0) < 0.5 * l.Length()) continue;
+        if (da + db < best_d) best = e, best_d = da + db;
+      }
+      if (best >= 0) segments.push_back(static_cast<int>(s)), edges.push_back(best);
+    }
+    EXPECT_EQ(set.segments, segments) << "match distance " << distance;
+    ASSERT_EQ(set.matches.size(), edges.size());
+    for (size_t i = 0; i < edges.size(); ++i) EXPECT_EQ(set.matches[i].edge, edges[i]);
+    EXPECT_GT(segments.size(), 50u);                  // lines beside the edges match ...
+    EXPECT_LT(segments.size(), lines.size() / 2);     // ... and most do not
+  }
+}
+
+// EdgePixelAcross first looks at the dilated edges (EdgeMap::near) and answers "none" where no edge
+// pixel lies near: the same answer as looking along the normal pixel by pixel, for points anywhere
+// in the image (on edges, beside them, on blank table) and normals in every direction, the image's
+// axes included.
+TEST(HypothesisFitTest, TheDilatedEdgesAnswerEdgeQueriesAsTheEdgesDo) {
+  const Camera camera = SyntheticCamera();
+  const Model bar = Bar();
+  const cv::Mat image = RenderBox(camera, bar.box_size_m, OnTable(bar.box_size_m, 0.01, -0.02, 0.7));
+  const LineDetection detection = DetectLinesAndEdges(image, camera, RecognizerOptions());
+  ASSERT_FALSE(detection.edge_map.near.empty());
+  EdgeMap plain = detection.edge_map;
+  plain.near.release();
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> x(-3, camera.width() + 3), y(-3, camera.height() + 3), turn(0, 2 * M_PI);
+  int answered_near = 0, found = 0;
+  for (int i = 0; i < 200000; ++i) {
+    const double a = i % 10 == 0 ? (i / 10 % 4) * M_PI / 2 : turn(rng);
+    const Eigen::Vector2d normal(std::cos(a), std::sin(a)), pixel(x(rng), y(rng));
+    for (int offset : {0, 1, 2, 3}) {
+      const std::optional<EdgePixel> fast = EdgePixelAcross(detection.edge_map, pixel, normal, offset);
+      const std::optional<EdgePixel> slow = EdgePixelAcross(plain, pixel, normal, offset);
+      ASSERT_EQ(fast.has_value(), slow.has_value()) << pixel.transpose() << " normal " << normal.transpose();
+      if (fast) {
+        EXPECT_EQ(fast->x, slow->x);
+        EXPECT_EQ(fast->y, slow->y);
+        ++found;
+      }
+    }
+    const int cx = static_cast<int>(std::floor(pixel.x() + 0.5)), cy = static_cast<int>(std::floor(pixel.y() + 0.5));
+    if (cx >= 0 && cy >= 0 && cx < camera.width() && cy < camera.height() && detection.edge_map.near.at<uint8_t>(cy, cx)) {
+      ++answered_near;
+    }
+  }
+  EXPECT_GT(found, 1000);                  // points on the block's edges were among them
+  EXPECT_LT(answered_near, 200000 / 10);  // and most points were answered by the dilated edges alone
 }
 
 }  // namespace

@@ -9,7 +9,7 @@
 // Environment: TEACHSIM_HOME (repository), TEACHSIM_SHARED (../shared), TEACHSIM_CACHE_DIR
 // (templates and index; default: bench-cache beside the executable, in the build folder);
 // TEACHSIM_RECOGNIZE_DUMP=DIR draws the images with a miss or a false detection, with the detected
-// segments and Canny edges (see DumpCase);
+// segments and Canny edges (see DumpCase; with TEACHSIM_RECOGNIZE_DUMP_ALL=1 every image);
 // TEACHSIM_RECOGNIZE_DEBUG=1 prints every LINE-MOD match beside the truth (and, for the recognizer,
 // each image's stage counts and times, each object it missed with the stage that lost it and the
 // evidence at the true pose, and each false detection); TEACHSIM_RECOGNIZE_NO_PEER=1 leaves LINE-MOD
@@ -299,13 +299,14 @@ std::optional<vision::FitResult> RefineWithFit(const Eigen::Vector3d& size, cons
   return fit;
 }
 
-// TEACHSIM_RECOGNIZE_DUMP=DIR: each image with a missed block or a false detection, as DIR/NAME.png
+// TEACHSIM_RECOGNIZE_DUMP=DIR: each image with a missed block or a false detection (every image with
+// TEACHSIM_RECOGNIZE_DUMP_ALL=1), as DIR/NAME.png
 // with the detected segments (yellow), the truth's visible edges (green), found recognitions (blue)
 // and false ones (red), and its Canny edges as DIR/NAME.edges.png.
 void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camera,
               const std::map<std::string, Eigen::Vector3d>& sizes, const vision::LineDetection& detection,
               const std::vector<vision::Recognition>& objects, const vision::ImageEvaluation& evaluation) {
-  bool interesting = evaluation.false_positives > 0;
+  bool interesting = evaluation.false_positives > 0 || std::getenv("TEACHSIM_RECOGNIZE_DUMP_ALL") != nullptr;
   for (const vision::ObjectOutcome& o : evaluation.objects) interesting = interesting || o.detection < 0;
   if (!interesting) return;
   cv::Mat out;
