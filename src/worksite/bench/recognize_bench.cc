@@ -620,9 +620,15 @@ int Run(const BenchArgs& args) {
             if (evaluation->detection_truth[d] != -1) continue;
             const vision::Recognition& r = recognized->objects[d];
             auto p = camera->Project(r.world_T_object.translation);
-            std::fprintf(stderr, "%s false %s at (%.0f, %.0f) z %.1f mm: score %.2f, matched %.2f, rms %.2f px\n",
+            double lowest = 1e9;
+            for (int v = 0; v < 8; ++v) {
+              lowest = std::min(lowest, (r.world_T_object * vision::BoxVertex(truth->model_sizes_m.at(r.model), v)).z());
+            }
+            std::fprintf(stderr,
+                         "%s false %s at (%.0f, %.0f) z %.1f mm, lowest point %.1f mm: score %.2f, matched %.2f, rms "
+                         "%.2f px\n",
                          c.name.c_str(), r.model.c_str(), p ? p->x() : -1, p ? p->y() : -1,
-                         r.world_T_object.translation.z() * 1000, r.score, r.matched_edge_fraction,
+                         r.world_T_object.translation.z() * 1000, lowest * 1000, r.score, r.matched_edge_fraction,
                          r.reprojection_rms_px);
           }
         }
