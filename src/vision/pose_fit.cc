@@ -50,7 +50,7 @@ void Residuals(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K_inv_t, co
   // What depends on the edge alone, once per edge (several lines match one edge; the fit's time was
   // mostly here): its image line l and, with J, dl/d(pose).
   struct PerEdge {
-    bool done = false, with_jacobian = false;
+    bool done = false;
     Eigen::Vector3d l;
     double norm = 0;
     Eigen::Matrix<double, 3, 6> dl;
@@ -59,7 +59,7 @@ void Residuals(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K_inv_t, co
   for (size_t i = 0; i < matches.size(); ++i) {
     const LineMatch& match = matches[i];
     PerEdge& edge = per_edge[static_cast<size_t>(match.edge)];
-    if (!edge.done || (J != nullptr && !edge.with_jacobian)) {
+    if (!edge.done) {
       const Eigen::Vector3d q1 = R * BoxVertex(size_m, kBoxEdges[static_cast<size_t>(match.edge)][0]);
       const Eigen::Vector3d q2 = R * BoxVertex(size_m, kBoxEdges[static_cast<size_t>(match.edge)][1]);
       const Eigen::Vector3d p1 = q1 + t, p2 = q2 + t;
@@ -72,7 +72,6 @@ void Residuals(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K_inv_t, co
         dn.leftCols<3>() = -Skew(p2 - p1);
         dn.rightCols<3>() = Skew(p2) * Skew(q1) - Skew(p1) * Skew(q2);
         edge.dl = K_inv_t * dn;
-        edge.with_jacobian = true;
       }
     }
     const Eigen::Vector3d& l = edge.l;
