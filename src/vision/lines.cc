@@ -228,8 +228,10 @@ std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::V
   // one in x and y: where the dilated edges show none around it, there is none (most samples of a
   // wrong pose, and the answer is the same).
   if (edge_map.near.data != nullptr && max_offset_px < kEdgeNearPx) {
-    const int x0 = static_cast<int>(std::floor(pixel.x() + 0.5)), y0 = static_cast<int>(std::floor(pixel.y() + 0.5));
-    if (x0 >= 0 && y0 >= 0 && x0 < cols && y0 < rows && !edge_map.near.ptr<uint8_t>(y0)[x0]) return std::nullopt;
+    const int x0 = static_cast<int>(std::floor(pixel.x() + 0.5)),
+              y0 = static_cast<int>(std::floor(pixel.y() + 0.5));
+    if (x0 >= 0 && y0 >= 0 && x0 < cols && y0 < rows && !edge_map.near.ptr<uint8_t>(y0)[x0])
+      return std::nullopt;
   }
   const float nx = static_cast<float>(normal.x()), ny = static_cast<float>(normal.y());
   for (int o = 0; o <= 2 * max_offset_px; ++o) {

@@ -252,8 +252,9 @@ TEST(HypothesisFitTest, MatchEdgesFindsWhatTestingEveryLineAgainstEveryEdgeFinds
   for (int i = 0; i < 3000; ++i) {
     const ImageLine& edge = lines[static_cast<size_t>(i) % 9];
     const Eigen::Vector2d dir = (edge.b - edge.a).normalized(), n(-dir.y(), dir.x());
-    const Eigen::Vector2d start = edge.a + (0.5 + 0.8 * u(rng)) * (edge.b - edge.a) + 12 * u(rng) * n +
-                                  (i % 3 == 0 ? Eigen::Vector2d(300 * u(rng), 300 * u(rng)) : Eigen::Vector2d::Zero());
+    const Eigen::Vector2d start =
+        edge.a + (0.5 + 0.8 * u(rng)) * (edge.b - edge.a) + 12 * u(rng) * n +
+        (i % 3 == 0 ? Eigen::Vector2d(300 * u(rng), 300 * u(rng)) : Eigen::Vector2d::Zero());
     const double angle = (i % 2 ? 0.15 : 1.5) * u(rng);
     const Eigen::Vector2d d = Eigen::Rotation2Dd(angle) * dir;
     lines.push_back({start, start + (5 + 60 * std::abs(u(rng))) * d});
@@ -271,14 +272,17 @@ TEST(HypothesisFitTest, MatchEdgesFindsWhatTestingEveryLineAgainstEveryEdgeFinds
       double best_d = 1e300;
       for (int e = 0; e < 12; ++e) {
         if (!(visible >> e & 1)) continue;
-        const Eigen::Vector2d a = (K * (camera_T_bar * BoxVertex(bar.box_size_m, kBoxEdges[e][0]))).hnormalized();
-        const Eigen::Vector2d b = (K * (camera_T_bar * BoxVertex(bar.box_size_m, kBoxEdges[e][1]))).hnormalized();
+        const Eigen::Vector2d a =
+            (K * (camera_T_bar * BoxVertex(bar.box_size_m, kBoxEdges[e][0]))).hnormalized();
+        const Eigen::Vector2d b =
+            (K * (camera_T_bar * BoxVertex(bar.box_size_m, kBoxEdges[e][1]))).hnormalized();
         const Eigen::Vector2d dir = (b - a).normalized(), n(-dir.y(), dir.x());
         if (std::abs(ldir.dot(dir)) < std::cos(max_angle)) continue;
         const double da = std::abs(n.dot(l.a - a)), db = std::abs(n.dot(l.b - a));
         if (da > distance || db > distance) continue;
         const double ta = dir.dot(l.a - a), tb = dir.dot(l.b - a);
-        if (std::min(std::max(ta, tb), (b - a).norm()) - std::max(std::min(ta, tb), 0.0) < 0.5 * l.Length()) continue;
+        if (std::min(std::max(ta, tb), (b - a).norm()) - std::max(std::min(ta, tb), 0.0) < 0.5 * l.Length())
+          continue;
         if (da + db < best_d) best = e, best_d = da + db;
       }
       if (best >= 0) segments.push_back(static_cast<int>(s)), edges.push_back(best);
@@ -286,8 +290,8 @@ TEST(HypothesisFitTest, MatchEdgesFindsWhatTestingEveryLineAgainstEveryEdgeFinds
     EXPECT_EQ(set.segments, segments) << "match distance " << distance;
     ASSERT_EQ(set.matches.size(), edges.size());
     for (size_t i = 0; i < edges.size(); ++i) EXPECT_EQ(set.matches[i].edge, edges[i]);
-    EXPECT_GT(segments.size(), 50u);                  // lines beside the edges match ...
-    EXPECT_LT(segments.size(), lines.size() / 2);     // ... and most do not
+    EXPECT_GT(segments.size(), 50u);               // lines beside the edges match ...
+    EXPECT_LT(segments.size(), lines.size() / 2);  // ... and most do not
   }
 }
 
@@ -304,8 +308,9 @@ TEST(HypothesisFitTest, TheDilatedEdgesAnswerEdgeQueriesAsTheEdgesDo) {
   EdgeMap plain = detection.edge_map;
   plain.near.release();
   std::mt19937 rng(11);
-  std::uniform_real_distribution<double> x(-3, camera.width() + 3), y(-3, camera.height() + 3), turn(0, 2 * M_PI);
-  int answered_near = 0, found = 0;
+  std::uniform_real_distribution<double> x(-3, camera.width() + 3), y(-3, camera.height() + 3),
+      turn(0, 2 * M_PI);
+  int probed = 0, found = 0;  // points with an edge pixel near (the probes ran); edge pixels found
   for (int i = 0; i < 200000; ++i) {
     const double a = i % 10 == 0 ? (i / 10 % 4) * M_PI / 2 : turn(rng);
     const Eigen::Vector2d normal(std::cos(a), std::sin(a)), pixel(x(rng), y(rng));
@@ -319,13 +324,15 @@ TEST(HypothesisFitTest, TheDilatedEdgesAnswerEdgeQueriesAsTheEdgesDo) {
         ++found;
       }
     }
-    const int cx = static_cast<int>(std::floor(pixel.x() + 0.5)), cy = static_cast<int>(std::floor(pixel.y() + 0.5));
-    if (cx >= 0 && cy >= 0 && cx < camera.width() && cy < camera.height() && detection.edge_map.near.at<uint8_t>(cy, cx)) {
-      ++answered_near;
+    const int cx = static_cast<int>(std::floor(pixel.x() + 0.5)),
+              cy = static_cast<int>(std::floor(pixel.y() + 0.5));
+    if (cx >= 0 && cy >= 0 && cx < camera.width() && cy < camera.height() &&
+        detection.edge_map.near.at<uint8_t>(cy, cx)) {
+      ++probed;
     }
   }
-  EXPECT_GT(found, 1000);                  // points on the block's edges were among them
-  EXPECT_LT(answered_near, 200000 / 10);  // and most points were answered by the dilated edges alone
+  EXPECT_GT(found, 1000);          // points on the block's edges were among them
+  EXPECT_LT(probed, 200000 / 10);  // and most points were answered by the dilated edges alone
 }
 
 }  // namespace

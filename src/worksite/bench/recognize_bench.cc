@@ -622,14 +622,16 @@ int Run(const BenchArgs& args) {
             auto p = camera->Project(r.world_T_object.translation);
             double lowest = 1e9;
             for (int v = 0; v < 8; ++v) {
-              lowest = std::min(lowest, (r.world_T_object * vision::BoxVertex(truth->model_sizes_m.at(r.model), v)).z());
+              lowest = std::min(
+                  lowest, (r.world_T_object * vision::BoxVertex(truth->model_sizes_m.at(r.model), v)).z());
             }
-            std::fprintf(stderr,
-                         "%s false %s at (%.0f, %.0f) z %.1f mm, lowest point %.1f mm: score %.2f, matched %.2f, rms "
-                         "%.2f px\n",
-                         c.name.c_str(), r.model.c_str(), p ? p->x() : -1, p ? p->y() : -1,
-                         r.world_T_object.translation.z() * 1000, lowest * 1000, r.score, r.matched_edge_fraction,
-                         r.reprojection_rms_px);
+            std::fprintf(
+                stderr,
+                "%s false %s at (%.0f, %.0f) z %.1f mm, lowest point %.1f mm: score %.2f, matched %.2f, rms "
+                "%.2f px\n",
+                c.name.c_str(), r.model.c_str(), p ? p->x() : -1, p ? p->y() : -1,
+                r.world_T_object.translation.z() * 1000, lowest * 1000, r.score, r.matched_edge_fraction,
+                r.reprojection_rms_px);
           }
         }
         if (const char* features = std::getenv("TEACHSIM_RECOGNIZE_FEATURES"); features != nullptr) {
