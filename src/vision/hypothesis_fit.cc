@@ -13,6 +13,7 @@
 // 25 -> 7, seed 8 9 -> 7, dev set 3 -> 2.
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "teachsim/vision/recognition_stages.h"
 
@@ -55,6 +56,8 @@ EdgeMatchSet MatchEdges(const Model& model, const Eigen::Matrix3d& K, const geom
     double covered = 0;
   };
   std::vector<EdgeGeom> edges;
+  // The edges' bounding box (for passing over far lines, below).
+  Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
   for (int e = 0; e < 12; ++e) {
     if (!(visible >> e & 1)) continue;
     const Eigen::Vector2d a = px[kBoxEdges[e][0]], b = px[kBoxEdges[e][1]];
@@ -63,18 +66,14 @@ EdgeMatchSet MatchEdges(const Model& model, const Eigen::Matrix3d& K, const geom
     const Eigen::Vector2d dir = (b - a) / len;
     edges.push_back({e, a, dir, {-dir.y(), dir.x()}, len});
     out.visible_length_px += len;
+    lo = lo.cwiseMin(a).cwiseMin(b);
+    hi = hi.cwiseMax(a).cwiseMax(b);
   }
   if (edges.empty()) return out;
   // A line that matches an edge lies within max_distance_px of it along at least half its own length,
   // so it reaches into the edges' bounding box grown by that distance (and a pixel more, against
   // rounding): every other line is passed over without testing it against each edge. Most of an
   // image's lines are far from any one pose (the recognizer's fits call this for every round).
-  Eigen::Vector2d lo = edges.front().a, hi = edges.front().a;
-  for (const EdgeGeom& g : edges) {
-    const Eigen::Vector2d b = g.a + g.length * g.dir;
-    lo = lo.cwiseMin(g.a).cwiseMin(b);
-    hi = hi.cwiseMax(g.a).cwiseMax(b);
-  }
   lo.array() -= max_distance_px + 1;
   hi.array() += max_distance_px + 1;
   const double cos_max = std::cos(max_angle_rad);
