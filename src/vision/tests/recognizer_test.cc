@@ -260,6 +260,11 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o = RecognizerOptions();
   o.refit_min_coverage = -0.1;
   EXPECT_NE(o.Validate().message().find("refit_min_coverage"), std::string::npos);
+  o = RecognizerOptions();
+  o.conflict_balance_margin = -1;
+  EXPECT_NE(o.Validate().message().find("conflict_balance_margin = -1 must be >= 0"), std::string::npos);
+  o.conflict_balance_margin = 0;  // off: valid
+  EXPECT_TRUE(o.Validate().ok());
 }
 
 std::string WriteTemp(const std::string& name, const std::string& text) {
@@ -603,6 +608,47 @@ TEST(RecognizerTest, AlternativesAreFittedUnlessSwitchedOff) {
     ASSERT_EQ(result->objects.size(), 1u);
     EXPECT_EQ(result->objects[0].model, "bar90");
     EXPECT_LT((result->objects[0].raw_world_T_object.translation - bar_pose.translation).norm(), 0.003);
+  }
+}
+
+// The selection's pairwise test: a rendered bar against a cube fitted onto its one end, and a
+// rendered cube against a bar laid over it and on past it. The right model's own outline (the bar's
+// far end; the cube's end face across the bar's top) is in the image, the wrong one's (the cube's
+// end across the bar's faces; the bar's over the plain table) is not: the candidate replaces its
+// rival in the first case and not the other way round.
+TEST(SelectionTest, WhatTheRightModelPredictsAloneIsInTheImage) {
+  const Camera camera = SyntheticCamera();
+  const RecognizerOptions options;
+  const FixedEdgeMap no_fixed = ProjectFixedEdges(nullptr, camera);
+  for (const double yaw : {-0.3, 0.45, 1.2}) {
+    const geometry::Pose3 bar = OnTable(Bar().box_size_m, 0.03, -0.02, yaw);
+    geometry::Pose3 cube = bar;  // on the bar's +x end
+    cube.translation = bar * Eigen::Vector3d(0.0225, 0, 0);
+    const Model bar_model = Bar(), cube_model = Cube();
+    auto own = [&](const LineDetection& d, const Model& m, const geometry::Pose3& pose,
+                   const Model& rival_model, const geometry::Pose3& rival) {
+      return OwnOutlineBalance(m, camera.camera_T_world() * pose,
+                               {{&rival_model, camera.camera_T_world() * rival}}, camera, d.edge_map,
+                               no_fixed, options);
+    };
+    const LineDetection bar_image =
+        DetectLinesAndEdges(RenderBoxes(camera, {{Bar().box_size_m, bar}}, 13), camera, options);
+    const int bar_own = own(bar_image, bar_model, bar, cube_model, cube);
+    const int cube_own = own(bar_image, cube_model, cube, bar_model, bar);
+    EXPECT_GE(bar_own, options.conflict_balance_margin) << "yaw " << yaw;
+    EXPECT_LE(cube_own, 3) << "yaw " << yaw;
+    const LineDetection cube_image =
+        DetectLinesAndEdges(RenderBoxes(camera, {{Cube().box_size_m, cube}}, 13), camera, options);
+    const int cube_alone = own(cube_image, cube_model, cube, bar_model, bar);
+    const int bar_alone = own(cube_image, bar_model, bar, cube_model, cube);
+    EXPECT_GE(cube_alone, options.conflict_balance_margin) << "yaw " << yaw;
+    EXPECT_LE(bar_alone, 3) << "yaw " << yaw;
+    // Nothing else predicted: the whole outline counts, and the true one is in the image.
+    EXPECT_GT(OwnOutlineBalance(bar_model, camera.camera_T_world() * bar, {}, camera, bar_image.edge_map,
+                                no_fixed, options),
+              bar_own);
+    std::printf("yaw %.2f: bar image: bar's own %d, cube's own %d; cube image: cube's own %d, bar's own %d\n",
+                yaw, bar_own, cube_own, cube_alone, bar_alone);
   }
 }
 

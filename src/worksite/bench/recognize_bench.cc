@@ -22,7 +22,7 @@
 // cannyhigh-X, checks-N, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX,
 // stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX, alternatives-N (0: no other models
 // fitted at the candidates' places), refitrms-PX, refitcoverage-X, refitscore-X (the edge-point refit's
-// limits; no-refit switches it off).
+// limits; no-refit switches it off), balance-N (the non-maximum suppression's pairwise margin; 0: off).
 // For teachsim, every scored object is put down to the stage that lost it
 // (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
@@ -473,6 +473,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"refitrms", [o](double v) { o->refit_max_rms_px = v; }},
       {"refitcoverage", [o](double v) { o->refit_min_coverage = v; }},
       {"refitscore", [o](double v) { o->refit_accept_score = v; }},
+      {"balance", [o](double v) { o->conflict_balance_margin = static_cast<int>(v); }},
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
@@ -480,7 +481,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "contrast-X, "
            "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, checks-N, "
            "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
-           "stepgrey-X, stepoffset-PX, alternatives-N, refitrms-PX, refitcoverage-X, refitscore-X)";
+           "stepgrey-X, stepoffset-PX, alternatives-N, refitrms-PX, refitcoverage-X, refitscore-X, "
+           "balance-N)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);
@@ -632,6 +634,24 @@ int Run(const BenchArgs& args) {
                 c.name.c_str(), r.model.c_str(), p ? p->x() : -1, p ? p->y() : -1,
                 r.world_T_object.translation.z() * 1000, lowest * 1000, r.score, r.matched_edge_fraction,
                 r.reprojection_rms_px);
+          }
+        }
+        if (evaluation.ok() && std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr) {
+          for (const vision::ObjectOutcome& o : evaluation->objects) {
+            if (o.detection < 0) continue;
+            const vision::TruthObject& t = c.truth[static_cast<std::size_t>(o.truth)];
+            // The tilt of each pose: its most vertical axis against the world's vertical, deg.
+            auto tilt_deg = [](const Eigen::Quaterniond& q) {
+              return std::acos(std::min(1.0, q.toRotationMatrix().row(2).cwiseAbs().maxCoeff())) * 180 / kPi;
+            };
+            const vision::Recognition& r = recognized->objects[static_cast<std::size_t>(o.detection)];
+            std::fprintf(
+                stderr,
+                "%s found %s %.2f: rotation %.2f deg (tilt %.2f, truth's %.2f), across %.2f mm, along %.2f "
+                "mm, rms %.2f px\n",
+                c.name.c_str(), t.model.c_str(), t.visible_fraction, o.rotation_error_rad * 180 / kPi,
+                tilt_deg(r.world_T_object.rotation), tilt_deg(t.world_T_object.rotation),
+                o.position_error.across_m * 1000, o.position_error.along_m * 1000, r.reprojection_rms_px);
           }
         }
         if (const char* features = std::getenv("TEACHSIM_RECOGNIZE_FEATURES"); features != nullptr) {

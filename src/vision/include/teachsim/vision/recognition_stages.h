@@ -272,6 +272,19 @@ struct FixedEdgeMap {
 FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& camera);
 // Whether a predicted edge through `pixel` with unit `normal` runs along a fixed edge (within 15 deg).
 bool OnFixedEdge(const FixedEdgeMap& fixed, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal);
+
+// What a pose predicts alone, weighed against the image (the selection's pairwise test, see
+// RecognizerOptions::conflict_balance_margin): the samples of the pose's predicted outline (as in
+// its edge support) that lie on none of `others`' visible projected edges (within 3 px and 15 deg)
+// and on no fixed edge, each +1 where the image shows a step edge across it (an edge pixel with its
+// gradient across and a grey-level step as in the step rule), -1 where the image shows contrast
+// across it but no edge, 0 where it shows neither (a lit face against the lit table). Where a wrong
+// model overlaps a block, the two outlines share most of the block's edges: the right one's own
+// edges are in the image, the wrong one's run over a face or the table.
+int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object,
+                      const std::vector<std::pair<const Model*, geometry::Pose3>>& others,
+                      const Camera& camera, const EdgeMap& edge_map, const FixedEdgeMap& fixed,
+                      const RecognizerOptions& options);
 struct PoseEvidence {
   double matched_fraction = 0;  // of the visible predicted edge length covered by matched lines
   double support_fraction = 0;  // of the informative sample points along the visible edges (an edge pixel

@@ -124,6 +124,13 @@ struct RecognizerOptions {
   // of 555 blocks found, false positives 15 -> 14 in 180 images (docs/benchmarks.md).
   double min_evidence_score = 0.3;
   double accept_evidence_score = 0.8;
+  // The selection's pairwise test: a candidate that conflicts with exactly one better-ranked accepted
+  // recognition (the same place) replaces it when what it predicts alone is in the image on balance
+  // by this many samples (2.5 px apart) or more while what the rival predicts alone is not (3 at most;
+  // OwnOutlineBalance, outlines of the other accepted recognitions left out of both). 0: off. On the
+  // renders of seeds 20-31, which it was not chosen on: 2110 / 2262 >= 0.7 visible found either way,
+  // 0.4-0.7 46 -> 48 of 183, false detections 46 -> 44 in 720 images (docs/benchmarks.md).
+  int conflict_balance_margin = 10;
   double work_area_radius_m = 0.6;           // poses farther than this from the world origin (in x, y) are culled, m
   double below_table_tolerance_m = 0.010;    // poses whose box reaches deeper under z = 0 are culled, m (a raw
                                              // fit is weakest along the camera ray, and the editor lifts what is
