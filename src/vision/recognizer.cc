@@ -1574,8 +1574,9 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
                                           fixed_edges, options_);
       const int own_a = OwnOutlineBalance(ma, a.camera_T_object, others_a, camera, detection.edge_map,
                                           fixed_edges, options_);
-      if (own_c >= options_.conflict_balance_margin && own_a <= kRivalMaxOwnBalance)
+      if (own_c >= options_.conflict_balance_margin && own_a <= kRivalMaxOwnBalance) {
         accepted[conflicts[0]] = i;
+      }
     }
   }
 
