@@ -489,6 +489,16 @@ float SampleGrey(const cv::Mat& m, const Eigen::Vector2d& p) {
   return static_cast<float>((1 - fy) * ((1 - fx) * m.at<uint8_t>(y0, x0) + fx * m.at<uint8_t>(y0, x0 + 1)) +
                             fy * ((1 - fx) * m.at<uint8_t>(y0 + 1, x0) + fx * m.at<uint8_t>(y0 + 1, x0 + 1)));
 }
+// The grey-level step across a predicted edge: the smoothed image offset_px to either side of `c`
+// along the unit `normal`, their difference's size.
+double GreyStepAcross(const EdgeMap& edge_map, const Eigen::Vector2d& c, const Eigen::Vector2d& normal,
+                      double offset_px) {
+  return std::abs(SampleGrey(edge_map.smoothed, c + offset_px * normal) -
+                  SampleGrey(edge_map.smoothed, c - offset_px * normal));
+}
+// A predicted edge is informative where the image shows this step across it at kContrastOffsetPx to
+// either side (RecognizerOptions::min_edge_contrast): a lit face against the lit table shows none.
+constexpr double kContrastOffsetPx = 2.5;
 // Samples every kOutlineSpacingPx along each visible predicted edge of a box in the image (the ends
 // left out: corners blur and shadows meet there): visit(point_in_camera, pixel, normal, edge) with the
 // unit normal to the projected edge and the box edge's index.
@@ -647,7 +657,6 @@ PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geo
                                         ClosestMatchesPerEdge(model, K, camera_T_object, set.matches), 0, 0)
                              .rms_px;
   }
-  constexpr double kContrastOffsetPx = 2.5;
   struct PerEdge {
     int samples = 0, free = 0, supported = 0, plus = 0, minus = 0;
     double length_px = 0;
@@ -663,15 +672,12 @@ PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geo
         ++pe.samples;
         const std::optional<EdgePixel> edge = EdgePixelAcross(detection.edge_map, c, normal, 2);
         const int sign = edge ? EdgeSign(*edge, normal) : 0;
-        if (edge && std::abs(SampleGrey(detection.edge_map.smoothed, c + options.step_offset_px * normal) -
-                             SampleGrey(detection.edge_map.smoothed, c - options.step_offset_px * normal)) >=
-                        options.min_step_grey) {
+        if (edge &&
+            GreyStepAcross(detection.edge_map, c, normal, options.step_offset_px) >= options.min_step_grey) {
           ++step_supported;
         }
-        const bool contrast =
-            sign != 0 || std::abs(SampleGrey(detection.edge_map.smoothed, c + kContrastOffsetPx * normal) -
-                                  SampleGrey(detection.edge_map.smoothed, c - kContrastOffsetPx * normal)) >=
-                             options.min_edge_contrast;
+        const bool contrast = sign != 0 || GreyStepAcross(detection.edge_map, c, normal, kContrastOffsetPx) >=
+                                               options.min_edge_contrast;
         supported += sign != 0 ? 1 : 0;
         informative += contrast ? 1 : 0;
         if (fixed != nullptr && OnFixedEdge(*fixed, c, normal)) {
@@ -904,7 +910,6 @@ int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object
                       const Camera& camera, const EdgeMap& edge_map, const FixedEdgeMap& fixed,
                       const RecognizerOptions& options) {
   constexpr double kSharedPx = 3, kSharedCos = 0.966;  // 15 deg
-  constexpr double kContrastPx = 2.5;
   struct Segment {
     Eigen::Vector2d p, dir;
     double length;
@@ -934,16 +939,10 @@ int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object
           }
         }
         if (OnFixedEdge(fixed, c, normal)) return;
-        const std::optional<EdgePixel> edge = EdgePixelAcross(edge_map, c, normal, 2);
-        const bool step = edge && EdgeSign(*edge, normal) != 0 &&
-                          std::abs(SampleGrey(edge_map.smoothed, c + options.step_offset_px * normal) -
-                                   SampleGrey(edge_map.smoothed, c - options.step_offset_px * normal)) >=
-                              options.min_step_grey;
-        if (step) {
+        if (EdgePixelAcross(edge_map, c, normal, 2) &&
+            GreyStepAcross(edge_map, c, normal, options.step_offset_px) >= options.min_step_grey) {
           ++balance;
-        } else if (std::abs(SampleGrey(edge_map.smoothed, c + kContrastPx * normal) -
-                            SampleGrey(edge_map.smoothed, c - kContrastPx * normal)) >=
-                   options.min_edge_contrast) {
+        } else if (GreyStepAcross(edge_map, c, normal, kContrastOffsetPx) >= options.min_edge_contrast) {
           --balance;
         }
       });
@@ -1561,21 +1560,21 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       const Candidate& a = candidates[accepted[conflicts[0]]];
       const Model& mc = models_.models[static_cast<size_t>(c.model)];
       const Model& ma = models_.models[static_cast<size_t>(a.model)];
-      // What else is accepted explains its own edges: those count for neither.
-      std::vector<std::pair<const Model*, geometry::Pose3>> others_c = {{&ma, a.camera_T_object}};
-      std::vector<std::pair<const Model*, geometry::Pose3>> others_a = {{&mc, c.camera_T_object}};
+      // What else is accepted explains its own edges: those count for neither. The first of the
+      // others is the one compared with: the rival for the candidate, then the candidate for it.
+      std::vector<std::pair<const Model*, geometry::Pose3>> others = {{&ma, a.camera_T_object}};
       for (size_t k = 0; k < accepted.size(); ++k) {
         if (k == conflicts[0]) continue;
         const Candidate& o = candidates[accepted[k]];
-        others_c.push_back({&models_.models[static_cast<size_t>(o.model)], o.camera_T_object});
-        others_a.push_back(others_c.back());
+        others.push_back({&models_.models[static_cast<size_t>(o.model)], o.camera_T_object});
       }
-      const int own_c = OwnOutlineBalance(mc, c.camera_T_object, others_c, camera, detection.edge_map,
-                                          fixed_edges, options_);
-      const int own_a = OwnOutlineBalance(ma, a.camera_T_object, others_a, camera, detection.edge_map,
-                                          fixed_edges, options_);
-      if (own_c >= options_.conflict_balance_margin && own_a <= kRivalMaxOwnBalance) {
-        accepted[conflicts[0]] = i;
+      if (OwnOutlineBalance(mc, c.camera_T_object, others, camera, detection.edge_map, fixed_edges,
+                            options_) >= options_.conflict_balance_margin) {
+        others.front() = {&mc, c.camera_T_object};
+        if (OwnOutlineBalance(ma, a.camera_T_object, others, camera, detection.edge_map, fixed_edges,
+                              options_) <= kRivalMaxOwnBalance) {
+          accepted[conflicts[0]] = i;
+        }
       }
     }
   }

@@ -635,8 +635,6 @@ int Run(const BenchArgs& args) {
                 r.world_T_object.translation.z() * 1000, lowest * 1000, r.score, r.matched_edge_fraction,
                 r.reprojection_rms_px);
           }
-        }
-        if (evaluation.ok() && std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr) {
           for (const vision::ObjectOutcome& o : evaluation->objects) {
             if (o.detection < 0) continue;
             const vision::TruthObject& t = c.truth[static_cast<std::size_t>(o.truth)];
