@@ -11,7 +11,7 @@ packages=(
   libmujoco-dev                    # the work site's simulated world; peer in the simulator benchmark
   libqhull-dev                     # MuJoCo's CMake target names its headers
   libopencv-dev libopencv-contrib-dev
-  libnanoflann-dev libflann-dev
+  libnanoflann-dev                 # the recognizer's model-view index (kd-tree search)
   libboost-dev libboost-system-dev
   libompl-dev liburdfdom-dev        # OMPL: peer in the planner benchmark; links Boost.Serialization
   libboost-serialization-dev libboost-filesystem-dev

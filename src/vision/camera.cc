@@ -68,27 +68,34 @@ bool Camera::InImage(const Eigen::Vector2d& pixel) const {
   return pixel.x() >= -0.5 && pixel.y() >= -0.5 && pixel.x() < width_ - 0.5 && pixel.y() < height_ - 0.5;
 }
 
-Eigen::Vector2d Camera::Distort(const Eigen::Vector2d& n) const {
-  const Distortion& d = distortion_;
+namespace {
+
+// Brown-Conrady distortion of normalized coordinates n and, where `jacobian` is given, its
+// derivative there: one evaluation of the shared terms for Newton's steps.
+Eigen::Vector2d DistortAt(const Distortion& d, const Eigen::Vector2d& n, Eigen::Matrix2d* jacobian) {
   const double x = n.x(), y = n.y();
   const double r2 = x * x + y * y;
   const double radial = 1 + r2 * (d.k1 + r2 * (d.k2 + r2 * d.k3));
+  if (jacobian != nullptr) {
+    const double dradial_dr2 = d.k1 + r2 * (2 * d.k2 + 3 * r2 * d.k3);
+    // d(r2)/dx = 2x, d(r2)/dy = 2y
+    Eigen::Matrix2d& j = *jacobian;
+    j(0, 0) = radial + x * dradial_dr2 * 2 * x + 2 * d.p1 * y + d.p2 * (2 * x + 4 * x);
+    j(0, 1) = x * dradial_dr2 * 2 * y + 2 * d.p1 * x + d.p2 * 2 * y;
+    j(1, 0) = y * dradial_dr2 * 2 * x + d.p1 * 2 * x + 2 * d.p2 * y;
+    j(1, 1) = radial + y * dradial_dr2 * 2 * y + d.p1 * (2 * y + 4 * y) + 2 * d.p2 * x;
+  }
   return {x * radial + 2 * d.p1 * x * y + d.p2 * (r2 + 2 * x * x),
           y * radial + d.p1 * (r2 + 2 * y * y) + 2 * d.p2 * x * y};
 }
 
+}  // namespace
+
+Eigen::Vector2d Camera::Distort(const Eigen::Vector2d& n) const { return DistortAt(distortion_, n, nullptr); }
+
 Eigen::Matrix2d Camera::DistortJacobian(const Eigen::Vector2d& n) const {
-  const Distortion& d = distortion_;
-  const double x = n.x(), y = n.y();
-  const double r2 = x * x + y * y;
-  const double radial = 1 + r2 * (d.k1 + r2 * (d.k2 + r2 * d.k3));
-  const double dradial_dr2 = d.k1 + r2 * (2 * d.k2 + 3 * r2 * d.k3);
-  // d(r2)/dx = 2x, d(r2)/dy = 2y
   Eigen::Matrix2d j;
-  j(0, 0) = radial + x * dradial_dr2 * 2 * x + 2 * d.p1 * y + d.p2 * (2 * x + 4 * x);
-  j(0, 1) = x * dradial_dr2 * 2 * y + 2 * d.p1 * x + d.p2 * 2 * y;
-  j(1, 0) = y * dradial_dr2 * 2 * x + d.p1 * 2 * x + 2 * d.p2 * y;
-  j(1, 1) = radial + y * dradial_dr2 * 2 * y + d.p1 * (2 * y + 4 * y) + 2 * d.p2 * x;
+  DistortAt(distortion_, n, &j);
   return j;
 }
 
@@ -113,20 +120,21 @@ std::optional<Eigen::Vector2d> Camera::Undistort(const Eigen::Vector2d& distorte
                                                  const Eigen::Vector2d& start) const {
   if (distortion_.IsZero()) return distorted;
   Eigen::Vector2d n = start.allFinite() ? start : distorted;
-  // Gauss-Newton (a square system: Newton) to full precision.
-  for (int i = 0; i < 30; ++i) {
-    const Eigen::Vector2d residual = Distort(n) - distorted;
-    if (residual.norm() < 1e-14 * (1 + distorted.norm())) break;
-    const Eigen::Matrix2d j = DistortJacobian(n);
+  // Gauss-Newton (a square system: Newton) to full precision. The residual and derivative at the
+  // last point serve the checks below.
+  Eigen::Matrix2d j;
+  Eigen::Vector2d residual = DistortAt(distortion_, n, &j) - distorted;
+  for (int i = 0; i < 30 && !(residual.norm() < 1e-14 * (1 + distorted.norm())); ++i) {
     const double det = j.determinant();
     if (!(std::abs(det) > 1e-12)) return std::nullopt;
     n -= j.inverse() * residual;
     if (!n.allFinite()) return std::nullopt;
+    residual = DistortAt(distortion_, n, &j) - distorted;
   }
   // Reject a root beyond the fold of the polynomial (the map is not orientation preserving there)
   // and a non-converged one.
-  if ((Distort(n) - distorted).norm() > 1e-9 * (1 + distorted.norm())) return std::nullopt;
-  if (DistortJacobian(n).determinant() <= 0) return std::nullopt;
+  if (residual.norm() > 1e-9 * (1 + distorted.norm())) return std::nullopt;
+  if (j.determinant() <= 0) return std::nullopt;
   return n;
 }
 

@@ -13,7 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
-#include <opencv2/flann.hpp>
+#include <nanoflann.hpp>
 #include <opencv2/imgproc.hpp>
 #include <optional>
 #include <set>
@@ -56,7 +56,10 @@ Status RecognizerOptions::Validate() const {
   if (view_distances_m.empty()) return Status::InvalidInput("RecognizerOptions::view_distances_m must not be empty");
   for (double d : view_distances_m) TEACHSIM_RETURN_IF_ERROR(positive("view_distances_m[]", d));
   TEACHSIM_RETURN_IF_ERROR(positive("neighbours", neighbours));
-  TEACHSIM_RETURN_IF_ERROR(positive("max_checks", max_checks));
+  if (!(index_search_eps >= 0)) {
+    return Status::InvalidInput("RecognizerOptions::index_search_eps = " +
+                                json::FormatNumber(index_search_eps) + " must be >= 0 (0: exact)");
+  }
   TEACHSIM_RETURN_IF_ERROR(positive("max_index_queries", max_index_queries));
   TEACHSIM_RETURN_IF_ERROR(positive("max_hypotheses", max_hypotheses));
   TEACHSIM_RETURN_IF_ERROR(positive("max_support_hypotheses", max_support_hypotheses));
@@ -195,11 +198,34 @@ struct IndexEntry {
   uint8_t vertices[5] = {0, 0, 0, 0, 0};  // the group's points as box vertex ids (see Group)
 };
 
+// One group kind's index vectors (the rows of a CV_32F matrix) as nanoflann reads them.
+struct IndexRows {
+  cv::Mat rows;
+  size_t kdtree_get_point_count() const { return static_cast<size_t>(rows.rows); }
+  float kdtree_get_pt(size_t i, size_t d) const { return rows.ptr<float>(static_cast<int>(i))[d]; }
+  template <class Box>
+  bool kdtree_get_bbox(Box&) const {
+    return false;
+  }
+};
+using KdTree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, IndexRows>, IndexRows,
+                                                   -1, uint32_t>;
+// A kd-tree over one kind's vectors (the tree keeps a reference to its rows: neither moves).
+struct KindTree {
+  explicit KindTree(const cv::Mat& vectors)
+      : data{vectors}, tree(vectors.cols, data, nanoflann::KDTreeSingleIndexAdaptorParams(kLeafSize)) {
+    tree.buildIndex();
+  }
+  static constexpr size_t kLeafSize = 10;
+  IndexRows data;
+  KdTree tree;
+};
+
 struct RecognizerIndex {
   std::vector<geometry::Pose3> views;  // camera_T_object of each view
   std::vector<IndexEntry> entries[kGroupKinds];
   cv::Mat vectors[kGroupKinds];  // CV_32F, one row per entry
-  std::shared_ptr<cv::flann::Index> trees[kGroupKinds];
+  std::shared_ptr<const KindTree> trees[kGroupKinds];
   size_t size() const {
     size_t n = 0;
     for (const auto& e : entries) n += e.size();
@@ -340,9 +366,7 @@ std::shared_ptr<RecognizerIndex> BuildIndex(const ModelLibrary& library, const R
 void BuildTrees(RecognizerIndex* index) {
   for (int k = 0; k < kGroupKinds; ++k) {
     if (index->vectors[k].rows == 0) continue;
-    // FLANN's randomized kd-trees with priority search: the descendant of Beis & Lowe's best-bin-first.
-    index->trees[k] = std::make_shared<cv::flann::Index>(index->vectors[k], cv::flann::KDTreeIndexParams(4),
-                                                         cvflann::FLANN_DIST_L2);
+    index->trees[k] = std::make_shared<const KindTree>(index->vectors[k]);
   }
 }
 
@@ -1149,11 +1173,17 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
         std::memcpy(queries.ptr<float>(static_cast<int>(i)), v.data(), v.size() * sizeof(float));
       }
       const int knn = std::min(options_.neighbours, index.vectors[k].rows);
-      cv::Mat indices, dists;
-      index.trees[k]->knnSearch(queries, indices, dists, knn, cv::flann::SearchParams(options_.max_checks));
+      std::vector<uint32_t> found(static_cast<size_t>(knn));
+      std::vector<float> found_d2(static_cast<size_t>(knn));
       for (size_t i = 0; i < members.size(); ++i) {
-        const int* idx = indices.ptr<int>(static_cast<int>(i));
-        const float* d2 = dists.ptr<float>(static_cast<int>(i));
+        nanoflann::KNNResultSet<float, uint32_t> neighbours(static_cast<size_t>(knn));
+        neighbours.init(found.data(), found_d2.data());
+        index.trees[k]->tree.findNeighbors(
+            neighbours, queries.ptr<float>(static_cast<int>(i)),
+            nanoflann::SearchParams(0, static_cast<float>(options_.index_search_eps)));
+        std::vector<int> idx(static_cast<size_t>(knn), -1);
+        for (size_t j = 0; j < neighbours.size(); ++j) idx[j] = static_cast<int>(found[j]);
+        const float* d2 = found_d2.data();
         double total = background;
         std::map<int, double> per_model;
         std::vector<double> w(static_cast<size_t>(knn));

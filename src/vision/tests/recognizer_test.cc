@@ -265,6 +265,10 @@ TEST(OptionsTest, ValidateNamesTheField) {
   EXPECT_NE(o.Validate().message().find("conflict_balance_margin = -1 must be >= 0"), std::string::npos);
   o.conflict_balance_margin = 0;  // off: valid
   EXPECT_TRUE(o.Validate().ok());
+  o.index_search_eps = -0.5;
+  EXPECT_NE(o.Validate().message().find("index_search_eps = -0.5 must be >= 0"), std::string::npos);
+  o.index_search_eps = 0;  // exact: valid
+  EXPECT_TRUE(o.Validate().ok());
 }
 
 std::string WriteTemp(const std::string& name, const std::string& text) {

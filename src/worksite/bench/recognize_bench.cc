@@ -462,7 +462,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"seglen", [o](double v) { o->min_segment_length_px = v; }},
       {"junction", [o](double v) { o->junction_gap_px = v; }},
       {"supportmin", [o](double v) { o->support_min_score = v; }},
-      {"checks", [o](double v) { o->max_checks = static_cast<int>(v); }},
+      {"eps", [o](double v) { o->index_search_eps = v; }},
       {"neighbours", [o](double v) { o->neighbours = static_cast<int>(v); }},
       {"cannylow", [o](double v) { o->canny_low *= v; }},
       {"cannyhigh", [o](double v) { o->canny_high *= v; }},

@@ -57,8 +57,10 @@ struct RecognizerOptions {
   int view_sphere_samples = 1200;            // viewing directions per model over the whole sphere (a quarter is kept, see BuildIndex)
   std::vector<double> view_distances_m = {0.45, 0.7};  // camera distances used for the model views, m
   int neighbours = 6;                        // k of the approximate k-nearest-neighbour search
-  int max_checks = 32;                       // leaves visited by the priority (best-bin-first) search (64 found no more
-                                             // blocks on seeds 7-9 and took 5 ms more per image with the lower Canny thresholds)
+  double index_search_eps = 1;               // approximate search (nanoflann): each neighbour within (1 + eps)
+                                             // times the true one's distance; 0: exact. On seeds 7-19 0, 1 and 2
+                                             // found the same blocks, one more than FLANN at 32 checks; 1.7 ms
+                                             // per image (FLANN 6.8, exact 3)
   int max_index_queries = 150;               // groups per kind looked up in the index, longest first (images with wood
                                              // grain give up to 1000; on seeds 7-13 150 found as many, +2, p90 time -10 ms)
   int max_hypotheses = 60;                   // index hypotheses tried per image, most probable first (120 before the
