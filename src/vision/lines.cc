@@ -2,12 +2,12 @@
 // pixel along an edge"): Canny edges, located to sub-pixel precision along the gradient, linked into
 // chains, undistorted, split Ramer-style and fitted by least squares.
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
-#include "sampling.h"
 #include "teachsim/vision/recognition_stages.h"
+
+#include "sampling.h"
 
 namespace teachsim::vision {
 
@@ -160,74 +160,7 @@ std::vector<ImageLine> MergeCollinear(std::vector<ImageLine> lines) {
   return out;
 }
 
-// The orientation bin (of kOrientationBins over 180 deg) of a direction (x, y), without
-// trigonometry: turned into the upper half-plane, its angle passes bin boundary k (at k 180/bins deg)
-// where the cross product of the boundary's direction and it is >= 0; a binary search over the
-// boundaries. (Within rounding of atan2's bins: OrientationMask's half-degree margin covers it.)
-int OrientationBin(float x, float y) {
-  static const auto boundaries = [] {
-    std::array<std::array<float, 2>, kOrientationBins> b{};
-    for (int k = 0; k < kOrientationBins; ++k) {
-      b[static_cast<size_t>(k)] = {static_cast<float>(std::cos(k * M_PI / kOrientationBins)),
-                                   static_cast<float>(std::sin(k * M_PI / kOrientationBins))};
-    }
-    return b;
-  }();
-  if (y < 0 || (y == 0 && x < 0)) x = -x, y = -y;
-  int lo = 0;  // boundary lo is passed; the bin is the last boundary passed
-  for (int step = kOrientationBins / 2; step > 0; step /= 2) {
-    const std::array<float, 2>& u = boundaries[static_cast<size_t>(lo + step)];
-    if (u[0] * y - u[1] * x >= 0) lo += step;
-  }
-  return lo;
-}
-
-// EdgeMap::near: each edge pixel's orientation bit (the pixels without a gradient can support no
-// edge and are left out), OR-ed over the (2 kEdgeNearPx + 1)^2 box, one pass per axis.
-cv::Mat OrientationNearMap(const cv::Mat& edges, const cv::Mat& gradient) {
-  const int w = edges.cols, h = edges.rows;
-  cv::Mat bits = cv::Mat::zeros(edges.size(), CV_16U), rows = cv::Mat::zeros(edges.size(), CV_16U),
-          near = cv::Mat::zeros(edges.size(), CV_16U);
-  for (int y = 0; y < h; ++y) {
-    const uint8_t* e = edges.ptr<uint8_t>(y);
-    const cv::Vec2f* g = gradient.ptr<cv::Vec2f>(y);
-    uint16_t* b = bits.ptr<uint16_t>(y);
-    for (int x = 0; x < w; ++x) {
-      if (e[x] && (g[x][0] != 0 || g[x][1] != 0))
-        b[x] = static_cast<uint16_t>(1u << OrientationBin(g[x][0], g[x][1]));
-    }
-  }
-  for (int y = 0; y < h; ++y) {
-    const uint16_t* b = bits.ptr<uint16_t>(y);
-    uint16_t* r = rows.ptr<uint16_t>(y);
-    for (int d = -kEdgeNearPx; d <= kEdgeNearPx; ++d) {
-      for (int x = std::max(0, -d); x < std::min(w, w - d); ++x) r[x] |= b[x + d];
-    }
-  }
-  for (int y = 0; y < h; ++y) {
-    uint16_t* n = near.ptr<uint16_t>(y);
-    for (int d = std::max(0, y - kEdgeNearPx); d <= std::min(h - 1, y + kEdgeNearPx); ++d) {
-      const uint16_t* r = rows.ptr<uint16_t>(d);
-      for (int x = 0; x < w; ++x) n[x] |= r[x];
-    }
-  }
-  return near;
-}
-
 }  // namespace
-
-uint16_t OrientationMask(const Eigen::Vector2d& normal) {
-  // EdgePixelAcross's 25 deg and half a degree for the float gradients' rounding.
-  constexpr double kTolerance = 25.5 * M_PI / 180, kBin = M_PI / kOrientationBins;
-  double angle = std::atan2(normal.y(), normal.x());
-  if (angle < 0) angle += M_PI;
-  uint16_t mask = 0;
-  for (int k = static_cast<int>(std::floor((angle - kTolerance) / kBin));
-       k <= static_cast<int>(std::floor((angle + kTolerance) / kBin)); ++k) {
-    mask = static_cast<uint16_t>(mask | 1u << ((k % kOrientationBins + kOrientationBins) % kOrientationBins));
-  }
-  return mask;
-}
 
 LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& camera,
                                   const RecognizerOptions& options) {
@@ -239,6 +172,8 @@ LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& came
   cv::Sobel(blurred, dy, CV_16S, 0, 1, 3);
   cv::Canny(dx, dy, out.edge_map.edges, options.canny_low, options.canny_high, true);
   out.edge_map.smoothed = blurred;
+  cv::dilate(out.edge_map.edges, out.edge_map.near,
+             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kEdgeNearPx + 1, 2 * kEdgeNearPx + 1)));
 
   cv::Mat fdx, fdy, magnitude;
   dx.convertTo(fdx, CV_32F);
@@ -274,7 +209,6 @@ LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& came
     }
     if (points.size() >= 4) SplitAndFit(points, 0, static_cast<int>(points.size()) - 1, options, &out.lines);
   }
-  out.edge_map.near = OrientationNearMap(out.edge_map.edges, out.edge_map.gradient);
   out.lines = MergeCollinear(std::move(out.lines));
   return out;
 }
@@ -286,23 +220,17 @@ std::vector<ImageLine> DetectLines(const cv::Mat& image_gray8, const Camera& cam
 
 std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel,
                                          const Eigen::Vector2d& normal, int max_offset_px) {
-  return EdgePixelAcross(edge_map, pixel, normal, max_offset_px, 0xffff);
-}
-
-std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel,
-                                         const Eigen::Vector2d& normal, int max_offset_px, uint16_t mask) {
   // The hottest loop of the recognizer (every support hypothesis and verified pose samples it): the
   // nearest pixel by floor(v + 0.5), and the unit gradient stored per edge pixel (no trigonometry).
   static const float cos_tol = static_cast<float>(std::cos(25 * M_PI / 180));
   const int cols = edge_map.edges.cols, rows = edge_map.edges.rows;
   // Every pixel looked at below lies within max_offset_px of the nearest one in x and y (floor(v + d
-  // + 0.5) - floor(v + 0.5) is within [-2, 2] for |d| <= 2): where the orientation-dilated edges show
-  // none around it that may run across `normal`, there is none (most samples of a wrong pose, and
-  // the answer is the same).
+  // + 0.5) - floor(v + 0.5) is within [-2, 2] for |d| <= 2): where the dilated edges show none
+  // around it, there is none (most samples of a wrong pose, and the answer is the same).
   if (edge_map.near.data != nullptr && max_offset_px <= kEdgeNearPx) {
     const int x0 = static_cast<int>(std::floor(pixel.x() + 0.5)),
               y0 = static_cast<int>(std::floor(pixel.y() + 0.5));
-    if (x0 >= 0 && y0 >= 0 && x0 < cols && y0 < rows && !(edge_map.near.ptr<uint16_t>(y0)[x0] & mask))
+    if (x0 >= 0 && y0 >= 0 && x0 < cols && y0 < rows && !edge_map.near.ptr<uint8_t>(y0)[x0])
       return std::nullopt;
   }
   const float nx = static_cast<float>(normal.x()), ny = static_cast<float>(normal.y());
@@ -329,11 +257,6 @@ int SignedEdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, cons
 
 bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
   return SignedEdgeAcross(edge_map, pixel, normal) != 0;
-}
-
-bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal,
-                uint16_t mask) {
-  return EdgePixelAcross(edge_map, pixel, normal, 2, mask).has_value();
 }
 
 }  // namespace teachsim::vision

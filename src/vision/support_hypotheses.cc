@@ -37,7 +37,6 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
   }
   struct Sample {
     Eigen::Vector2d at, normal;
-    uint16_t mask;
   };
   thread_local std::vector<Sample> samples;
   samples.clear();
@@ -47,11 +46,10 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
     const double length = (b - a).norm();
     if (length < 3) continue;
     const Eigen::Vector2d along = (b - a) / length, normal(-along.y(), along.x());
-    const uint16_t mask = OrientationMask(normal);
     const int n = std::max(2, static_cast<int>(length / spacing_px));
     for (int i = 0; i < n; ++i) {
       const Eigen::Vector2d c = a + (0.08 + 0.84 * (i + 0.5) / n) * (b - a);
-      if (camera.InImage(c)) samples.push_back({c, normal, mask});
+      if (camera.InImage(c)) samples.push_back({c, normal});
     }
   }
   const int count = static_cast<int>(samples.size());
@@ -60,8 +58,7 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
   int supported = 0;
   for (int i = 0; i < count; ++i) {
     if (supported + (count - i) < needed) return 0;
-    const Sample& sample = samples[static_cast<size_t>(i)];
-    if (EdgeAcross(edge_map, sample.at, sample.normal, sample.mask)) ++supported;
+    if (EdgeAcross(edge_map, samples[static_cast<size_t>(i)].at, samples[static_cast<size_t>(i)].normal)) ++supported;
   }
   return static_cast<double>(supported) / count;
 }

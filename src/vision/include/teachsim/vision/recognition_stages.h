@@ -36,14 +36,10 @@ struct EdgeMap {
   cv::Mat gradient;   // CV_32FC2, unit gradient (x, y) at edge pixels, (0, 0) elsewhere
   cv::Mat magnitude;  // CV_32F, gradient magnitude (for sub-pixel edge positions)
   cv::Mat smoothed;   // CV_8U, the image after the Gaussian (contrast across predicted edges)
-  cv::Mat near;       // CV_16U: bit b set where an edge pixel whose gradient orientation lies in bin b
-                      // (kOrientationBins over 180 deg) is within kEdgeNearPx in x and y (the edges
-                      // dilated by orientation): a quick "no edge here" for EdgePixelAcross; empty: not used
+  cv::Mat near;       // CV_8U, non-zero where a Canny edge pixel lies within kEdgeNearPx in x and y (the
+                      // edges dilated): a quick "no edge here" for EdgePixelAcross; empty: not used
 };
-inline constexpr int kEdgeNearPx = 2, kOrientationBins = 16;
-// The orientation bins of `near` that may hold an edge pixel whose gradient is within EdgePixelAcross's
-// 25 deg of `normal` (either sign): for a predicted edge's samples, which share its normal.
-uint16_t OrientationMask(const Eigen::Vector2d& normal);
+inline constexpr int kEdgeNearPx = 2;
 // The nearest Canny edge pixel across a predicted edge through `pixel` (distorted image; 0, +1,
 // -1, +2, -2, ... px along the unit `normal`, up to max_offset_px) whose gradient runs across the
 // edge (within 25 deg): what edge support (2 px) and the editor's fit on edge points (3 px) look for.
@@ -53,17 +49,11 @@ struct EdgePixel {
 };
 std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel,
                                          const Eigen::Vector2d& normal, int max_offset_px);
-// The same answer, sooner where the edge pixels near `pixel` all run the wrong way: `mask` is
-// OrientationMask(normal) (computed once per predicted edge).
-std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel,
-                                         const Eigen::Vector2d& normal, int max_offset_px, uint16_t mask);
 // The sign of an edge pixel's gradient along `normal`: +1 or -1 (its polarity across the edge).
 int EdgeSign(const EdgePixel& edge, const Eigen::Vector2d& normal);
 // Whether a predicted edge through `pixel` (distorted image; `normal` its unit normal) has a Canny
 // edge pixel within 2 px across it whose gradient runs across it (within 25 deg): edge support.
 bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal);
-bool EdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal,
-                uint16_t mask);
 // The same with the sign of that edge pixel's gradient along `normal`: +1 or -1, 0 where none is.
 int SignedEdgeAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal);
 struct LineDetection {
