@@ -227,18 +227,21 @@ std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::V
   // Every pixel looked at below lies within max_offset_px of the nearest one in x and y (floor(v + d
   // + 0.5) - floor(v + 0.5) is within [-2, 2] for |d| <= 2): where the dilated edges show none
   // around it, there is none (most samples of a wrong pose, and the answer is the same).
+  // floor(v + 0.5) where it lies in [0, size), else -1: for v + 0.5 >= 0 truncation is the floor
+  // (cheaper than std::floor without SSE4.1), and below 0 the pixel is outside either way.
+  auto nearest = [](double v, int size) {
+    const double t = v + 0.5;
+    return t >= 0 && t < size ? static_cast<int>(t) : -1;
+  };
   if (edge_map.near.data != nullptr && max_offset_px <= kEdgeNearPx) {
-    const int x0 = static_cast<int>(std::floor(pixel.x() + 0.5)),
-              y0 = static_cast<int>(std::floor(pixel.y() + 0.5));
-    if (x0 >= 0 && y0 >= 0 && x0 < cols && y0 < rows && !edge_map.near.ptr<uint8_t>(y0)[x0])
-      return std::nullopt;
+    const int x0 = nearest(pixel.x(), cols), y0 = nearest(pixel.y(), rows);
+    if (x0 >= 0 && y0 >= 0 && !edge_map.near.ptr<uint8_t>(y0)[x0]) return std::nullopt;
   }
   const float nx = static_cast<float>(normal.x()), ny = static_cast<float>(normal.y());
   for (int o = 0; o <= 2 * max_offset_px; ++o) {
     const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
-    const int x = static_cast<int>(std::floor(pixel.x() + offset * normal.x() + 0.5));
-    const int y = static_cast<int>(std::floor(pixel.y() + offset * normal.y() + 0.5));
-    if (x < 0 || y < 0 || x >= cols || y >= rows) continue;
+    const int x = nearest(pixel.x() + offset * normal.x(), cols), y = nearest(pixel.y() + offset * normal.y(), rows);
+    if (x < 0 || y < 0) continue;
     if (!edge_map.edges.ptr<uint8_t>(y)[x]) continue;
     const cv::Vec2f g = edge_map.gradient.ptr<cv::Vec2f>(y)[x];
     if (std::abs(g[0] * nx + g[1] * ny) >= cos_tol) return EdgePixel{x, y, g[0], g[1]};
