@@ -224,15 +224,15 @@ std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::V
   // nearest pixel by floor(v + 0.5), and the unit gradient stored per edge pixel (no trigonometry).
   static const float cos_tol = static_cast<float>(std::cos(25 * M_PI / 180));
   const int cols = edge_map.edges.cols, rows = edge_map.edges.rows;
-  // Every pixel looked at below lies within max_offset_px of the nearest one in x and y (floor(v + d
-  // + 0.5) - floor(v + 0.5) is within [-2, 2] for |d| <= 2): where the dilated edges show none
-  // around it, there is none (most samples of a wrong pose, and the answer is the same).
-  // floor(v + 0.5) where it lies in [0, size), else -1: for v + 0.5 >= 0 truncation is the floor
-  // (cheaper than std::floor without SSE4.1), and below 0 the pixel is outside either way.
+  // The nearest pixel, floor(v + 0.5), where it lies in [0, size), else -1: for v + 0.5 >= 0
+  // truncation is the floor (cheaper than std::floor without SSE4.1); below 0 it is outside anyway.
   auto nearest = [](double v, int size) {
     const double t = v + 0.5;
     return t >= 0 && t < size ? static_cast<int>(t) : -1;
   };
+  // Every pixel looked at below lies within max_offset_px of the nearest one in x and y (floor(v + d
+  // + 0.5) - floor(v + 0.5) is within [-2, 2] for |d| <= 2): where the dilated edges show none
+  // around it, there is none (most samples of a wrong pose, and the answer is the same).
   if (edge_map.near.data != nullptr && max_offset_px <= kEdgeNearPx) {
     const int x0 = nearest(pixel.x(), cols), y0 = nearest(pixel.y(), rows);
     if (x0 >= 0 && y0 >= 0 && !edge_map.near.ptr<uint8_t>(y0)[x0]) return std::nullopt;

@@ -1171,41 +1171,32 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
         });
         members.erase(keep, members.end());
       }
-      const int dim = GroupDimension(static_cast<GroupKind>(k));
-      cv::Mat queries(static_cast<int>(members.size()), dim, CV_32F);
-      for (size_t i = 0; i < members.size(); ++i) {
-        const std::vector<float> v = IndexVector(groups[static_cast<size_t>(members[i])]);
-        std::memcpy(queries.ptr<float>(static_cast<int>(i)), v.data(), v.size() * sizeof(float));
-      }
-      const int knn = std::min(options_.neighbours, index.vectors[k].rows);
-      std::vector<uint32_t> found(static_cast<size_t>(knn));
-      std::vector<float> found_d2(static_cast<size_t>(knn));
-      for (size_t i = 0; i < members.size(); ++i) {
-        nanoflann::KNNResultSet<float, uint32_t> neighbours(static_cast<size_t>(knn));
-        neighbours.init(found.data(), found_d2.data());
-        index.trees[k]->tree.findNeighbors(
-            neighbours, queries.ptr<float>(static_cast<int>(i)),
-            nanoflann::SearchParams(0, static_cast<float>(options_.index_search_eps)));
-        std::vector<int> idx(static_cast<size_t>(knn), -1);
-        for (size_t j = 0; j < neighbours.size(); ++j) idx[j] = static_cast<int>(found[j]);
-        const float* d2 = found_d2.data();
+      const size_t knn = static_cast<size_t>(std::min(options_.neighbours, index.vectors[k].rows));
+      const nanoflann::SearchParams search(0, static_cast<float>(options_.index_search_eps));
+      std::vector<uint32_t> found(knn);
+      std::vector<float> d2(knn);
+      std::vector<double> w(knn);
+      for (int g : members) {
+        const std::vector<float> query = IndexVector(groups[static_cast<size_t>(g)]);
+        nanoflann::KNNResultSet<float, uint32_t> neighbours(knn);
+        neighbours.init(found.data(), d2.data());
+        index.trees[k]->tree.findNeighbors(neighbours, query.data(), search);
+        const size_t count = neighbours.size();  // nearest first
         double total = background;
         std::map<int, double> per_model;
-        std::vector<double> w(static_cast<size_t>(knn));
-        for (int j = 0; j < knn; ++j) {
-          if (idx[j] < 0) continue;
-          w[static_cast<size_t>(j)] = std::exp(-d2[j] / (2 * kSigma * kSigma));
-          total += w[static_cast<size_t>(j)];
-          per_model[index.entries[k][static_cast<size_t>(idx[j])].model] += w[static_cast<size_t>(j)];
+        for (size_t j = 0; j < count; ++j) {
+          w[j] = std::exp(-d2[j] / (2 * kSigma * kSigma));
+          total += w[j];
+          per_model[index.entries[k][found[j]].model] += w[j];
         }
-        for (int j = 0; j < knn; ++j) {
-          if (idx[j] < 0) continue;
-          const double p_model = per_model[index.entries[k][static_cast<size_t>(idx[j])].model] / total;
+        for (size_t j = 0; j < count; ++j) {
+          const double p_model = per_model[index.entries[k][found[j]].model] / total;
           // The neighbour's own weight orders the views within a model.
-          const double p = p_model * w[static_cast<size_t>(j)] / std::max(w[0], 1e-300);
+          const double p = p_model * w[j] / std::max(w[0], 1e-300);
           if (p < 1e-3) continue;
           // Larger groups are more specific (paper §7.1): ties go to them.
-          hypotheses.push_back({p * (k == static_cast<int>(GroupKind::kChain4) ? 1.2 : 1.0), members[i], k, idx[j]});
+          hypotheses.push_back({p * (k == static_cast<int>(GroupKind::kChain4) ? 1.2 : 1.0), g, k,
+                                static_cast<int>(found[j])});
         }
       }
     }
