@@ -17,7 +17,7 @@ import sys
 
 COLUMNS = ("set case model kind outcome accepted best visible matched support coverage supported_px rms "
            "rms_closest matches cont long_cont fixed_share free_support free_coverage free_supported_px "
-           "polarity edges_supported edges_visible score step_supported_px").split()
+           "polarity edges_supported edges_visible score step_supported_px centre_x centre_y").split()
 NUMERIC = [c for c in COLUMNS[3:] if c != "outcome"]
 # The features, in EvidenceScore's order (recognition_stages.h): what the score is a function of.
 FEATURES = ["matched", "support", "coverage", "rms", "rms_closest", "cont", "long_cont", "fixed_share",

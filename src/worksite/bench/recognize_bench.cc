@@ -302,16 +302,21 @@ std::optional<vision::FitResult> RefineWithFit(const Eigen::Vector3d& size, cons
 // TEACHSIM_RECOGNIZE_DUMP=DIR: each image with a missed block or a false detection (every image with
 // TEACHSIM_RECOGNIZE_DUMP_ALL=1), as DIR/NAME.png
 // with the detected segments (yellow), the truth's visible edges (green), found recognitions (blue)
-// and false ones (red), and its Canny edges as DIR/NAME.edges.png.
+// and false ones (red), its Canny edges as DIR/NAME.edges.png, and each missed block close up
+// (below).
 void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camera,
               const std::map<std::string, Eigen::Vector3d>& sizes, const vision::LineDetection& detection,
-              const std::vector<vision::Recognition>& objects, const vision::ImageEvaluation& evaluation) {
+              const std::vector<vision::Recognition>& objects, const vision::ImageEvaluation& evaluation,
+              const std::vector<vision::ImageCorner>& corners) {
   bool interesting = evaluation.false_positives > 0 || std::getenv("TEACHSIM_RECOGNIZE_DUMP_ALL") != nullptr;
   for (const vision::ObjectOutcome& o : evaluation.objects) interesting = interesting || o.detection < 0;
   if (!interesting) return;
   cv::Mat out;
   cv::cvtColor(c.image, out, cv::COLOR_GRAY2BGR);
-  auto draw = [&](const std::string& model, const geometry::Pose3& world_T_object, const cv::Scalar& colour) {
+  // A box's visible edges into `image`, through the lens; `at` maps an image pixel to image's.
+  const auto identity = [](const Eigen::Vector2d& p) { return cv::Point2d(p.x(), p.y()); };
+  auto draw_into = [&](cv::Mat& image, const auto& at, const std::string& model, const geometry::Pose3& world_T_object,
+                       const cv::Scalar& colour) {
     const Eigen::Vector3d size = sizes.at(model);
     const geometry::Pose3 camera_T_object = camera.camera_T_world() * world_T_object;
     const std::uint16_t visible = vision::VisibleBoxEdges(size, camera_T_object.Inverse().translation);
@@ -324,12 +329,13 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
       std::optional<Eigen::Vector2d> prev;
       for (int i = 0; i <= 10; ++i) {
         const auto p = camera.ProjectFromCamera(a + (b - a) * (i / 10.0));
-        if (p && prev)
-          cv::line(out, cv::Point2d(prev->x(), prev->y()), cv::Point2d(p->x(), p->y()), colour, 1,
-                   cv::LINE_AA);
+        if (p && prev) cv::line(image, at(*prev), at(*p), colour, 1, cv::LINE_AA);
         prev = p;
       }
     }
+  };
+  auto draw = [&](const std::string& model, const geometry::Pose3& world_T_object, const cv::Scalar& colour) {
+    draw_into(out, identity, model, world_T_object, colour);
   };
   for (const vision::TruthObject& t : c.truth) draw(t.model, t.world_T_object, cv::Scalar(0, 200, 0));
   for (std::size_t d = 0; d < objects.size(); ++d) {
@@ -354,6 +360,40 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
                                              : c.name);
   cv::imwrite(stem + ".png", out);
   cv::imwrite(stem + ".edges.png", detection.edge_map.edges);
+  // Each missed block close up (3x, nearest neighbour): the segments, the support-plane source's
+  // corners with their arms (magenta) and the truth's visible edges, as DIR/NAME.MODEL.png.
+  constexpr int kZoom = 3;
+  for (const vision::ObjectOutcome& o : evaluation.objects) {
+    if (o.detection >= 0 || o.truth < 0) continue;
+    const vision::TruthObject& t = c.truth[static_cast<std::size_t>(o.truth)];
+    const auto centre = camera.Project(t.world_T_object.translation);
+    if (!centre) continue;
+    const double depth_m = std::max(0.05, (camera.camera_T_world() * t.world_T_object.translation).z());
+    const int half = static_cast<int>(0.7 * sizes.at(t.model).norm() * camera.intrinsics().fx / depth_m) + 10;
+    const cv::Rect roi = cv::Rect(static_cast<int>(centre->x()) - half, static_cast<int>(centre->y()) - half, 2 * half,
+                                  2 * half) &
+                         cv::Rect(0, 0, out.cols, out.rows);
+    if (roi.width < 8 || roi.height < 8) continue;
+    cv::Mat grey, close;
+    cv::cvtColor(c.image(roi), grey, cv::COLOR_GRAY2BGR);
+    cv::resize(grey, close, cv::Size(), kZoom, kZoom, cv::INTER_NEAREST);
+    auto close_up = [&](const Eigen::Vector2d& p) {
+      return cv::Point2d((p.x() - roi.x + 0.5) * kZoom - 0.5, (p.y() - roi.y + 0.5) * kZoom - 0.5);
+    };
+    auto zoomed = [&](const Eigen::Vector2d& undistorted) {
+      const cv::Point2d p = to_image(undistorted);
+      return close_up(Eigen::Vector2d(p.x, p.y));
+    };
+    draw_into(close, close_up, t.model, t.world_T_object, cv::Scalar(0, 200, 0));
+    for (const vision::ImageLine& l : detection.lines) {
+      cv::line(close, zoomed(l.a), zoomed(l.b), cv::Scalar(0, 220, 255), 1, cv::LINE_AA);
+    }
+    for (const vision::ImageCorner& k : corners) {
+      for (const Eigen::Vector2d& arm : k.arm_end) cv::line(close, zoomed(k.point), zoomed(arm), cv::Scalar(255, 0, 255), 1);
+      cv::circle(close, zoomed(k.point), 4, cv::Scalar(255, 0, 255), 1);
+    }
+    cv::imwrite(stem + "." + t.model + ".png", close);
+  }
 }
 
 const char* OutcomeName(vision::RecognitionTrace::Outcome outcome) {
@@ -417,15 +457,16 @@ void AppendFeatures(const std::string& path, const std::string& set_name, const 
     }
     const vision::PoseEvidence e =
         vision::EvaluatePose(model, camera, fitted.camera_T_object, detection, options, &fixed);
+    const Eigen::Vector2d centre = (K * fitted.camera_T_object.translation).hnormalized();
     std::fprintf(
         f,
         "%s\t%s\t%s\t%d\t%s\t%d\t%.2f\t%.3f\t%.4f\t%.4f\t%.4f\t%.1f\t%.3f\t%.3f\t%d\t%d\t%d\t%.4f\t%.4f\t%.4f"
-        "\t%.1f\t%.4f\t%.0f\t%.0f\t%.4f\t%.1f\n",
+        "\t%.1f\t%.4f\t%.0f\t%.0f\t%.4f\t%.1f\t%.1f\t%.1f\n",
         set_name.c_str(), c.name.c_str(), model.name.c_str(), fitted.group_kind, OutcomeName(fitted.outcome),
         fitted.accepted ? 1 : 0, best, visible, e.matched_fraction, e.support_fraction, e.coverage,
         e.supported_px, e.rms_px, e.rms_closest_px, e.matches, e.continued_ends, e.long_continued_ends,
         e.fixed_share, e.free_support_fraction, e.free_coverage, e.free_supported_px, e.polarity,
-        e.edges_supported, e.edges_visible, vision::EvidenceScore(e), e.step_supported_px);
+        e.edges_supported, e.edges_visible, vision::EvidenceScore(e), e.step_supported_px, centre.x(), centre.y());
   }
   std::fclose(f);
 }
@@ -659,7 +700,8 @@ int Run(const BenchArgs& args) {
         }
         if (const char* dump_dir = std::getenv("TEACHSIM_RECOGNIZE_DUMP");
             evaluation.ok() && dump_dir != nullptr) {
-          DumpCase(dump_dir, c, *camera, truth->model_sizes_m, detection, recognized->objects, *evaluation);
+          DumpCase(dump_dir, c, *camera, truth->model_sizes_m, detection, recognized->objects, *evaluation,
+                   vision::FindCorners(detection.lines, recognizer->options()));
         }
         for (std::size_t i = 0; i < c.truth.size(); ++i) {
           const vision::TruthObject& t = c.truth[i];
