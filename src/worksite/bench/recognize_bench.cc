@@ -659,6 +659,10 @@ int Run(const BenchArgs& args) {
         const std::vector<vision::Group> groups = vision::FindGroups(detection.lines, recognizer->options());
         auto evaluation = vision::EvaluateImage(c.truth, found[0], truth->model_sizes_m, eye, match);
         if (evaluation.ok() && std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr) {
+          // The tilt of a pose: its most vertical axis against the world's vertical, deg.
+          auto tilt_deg = [](const Eigen::Quaterniond& q) {
+            return std::acos(std::min(1.0, q.toRotationMatrix().row(2).cwiseAbs().maxCoeff())) * 180 / kPi;
+          };
           for (std::size_t d = 0; d < found[0].size(); ++d) {
             if (evaluation->detection_truth[d] != -1) continue;
             const vision::Recognition& r = recognized->objects[d];
@@ -670,19 +674,34 @@ int Run(const BenchArgs& args) {
             }
             std::fprintf(
                 stderr,
-                "%s false %s at (%.0f, %.0f) z %.1f mm, lowest point %.1f mm: score %.2f, matched %.2f, rms "
-                "%.2f px\n",
+                "%s false %s at (%.0f, %.0f) world (%.1f, %.1f, %.1f) mm, lowest point %.1f mm: score %.2f, matched "
+                "%.2f, rms %.2f px\n",
                 c.name.c_str(), r.model.c_str(), p ? p->x() : -1, p ? p->y() : -1,
-                r.world_T_object.translation.z() * 1000, lowest * 1000, r.score, r.matched_edge_fraction,
+                1000 * r.world_T_object.translation.x(), 1000 * r.world_T_object.translation.y(),
+                1000 * r.world_T_object.translation.z(), lowest * 1000, r.score, r.matched_edge_fraction,
                 r.reprojection_rms_px);
+            // The nearest true block of the same model, if any: how far off this one is.
+            const vision::TruthObject* nearest = nullptr;
+            for (const vision::TruthObject& t : c.truth) {
+              if (t.model == r.model && (nearest == nullptr || (t.world_T_object.translation - r.world_T_object.translation).norm() <
+                                                                   (nearest->world_T_object.translation - r.world_T_object.translation).norm())) {
+                nearest = &t;
+              }
+            }
+            if (nearest != nullptr) {
+              std::fprintf(stderr,
+                           "    nearest true %s: %.1f mm away (raw pose %.1f mm), turned %.1f deg (tilt %.2f, truth's %.2f)\n",
+                           r.model.c_str(), 1000 * (nearest->world_T_object.translation - r.world_T_object.translation).norm(),
+                           1000 * (nearest->world_T_object.translation - r.raw_world_T_object.translation).norm(),
+                           vision::SymmetricRotationError(nearest->world_T_object.rotation, r.world_T_object.rotation,
+                                                          vision::BoxSymmetries(truth->model_sizes_m.at(r.model))) * 180 / kPi,
+                           tilt_deg(r.world_T_object.rotation), tilt_deg(nearest->world_T_object.rotation));
+            }
+            for (const std::string& a : r.adjustments) std::fprintf(stderr, "    editor: %s\n", a.c_str());
           }
           for (const vision::ObjectOutcome& o : evaluation->objects) {
             if (o.detection < 0) continue;
             const vision::TruthObject& t = c.truth[static_cast<std::size_t>(o.truth)];
-            // The tilt of each pose: its most vertical axis against the world's vertical, deg.
-            auto tilt_deg = [](const Eigen::Quaterniond& q) {
-              return std::acos(std::min(1.0, q.toRotationMatrix().row(2).cwiseAbs().maxCoeff())) * 180 / kPi;
-            };
             const vision::Recognition& r = recognized->objects[static_cast<std::size_t>(o.detection)];
             std::fprintf(
                 stderr,
@@ -770,9 +789,11 @@ int Run(const BenchArgs& args) {
         }
         for (const vision::TruthObject& t : c.truth) {
           auto p = camera->Project(t.world_T_object.translation);
-          std::fprintf(stderr, "%s truth %s %.2f at (%.0f, %.0f) z %.3f\n", c.name.c_str(), t.model.c_str(),
-                       t.visible_fraction, p ? p->x() : -1, p ? p->y() : -1,
-                       (camera->camera_T_world() * t.world_T_object.translation).z());
+          std::fprintf(stderr, "%s truth %s %.2f at (%.0f, %.0f) depth %.3f m, world (%.1f, %.1f, %.1f) mm\n",
+                       c.name.c_str(), t.model.c_str(), t.visible_fraction, p ? p->x() : -1, p ? p->y() : -1,
+                       (camera->camera_T_world() * t.world_T_object.translation).z(),
+                       1000 * t.world_T_object.translation.x(), 1000 * t.world_T_object.translation.y(),
+                       1000 * t.world_T_object.translation.z());
         }
       }
       // The same matches refined by the recognizer's fit: line detection and fitting are added to
