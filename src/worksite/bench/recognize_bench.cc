@@ -705,9 +705,11 @@ int Run(const BenchArgs& args) {
             const vision::Recognition& r = recognized->objects[static_cast<std::size_t>(o.detection)];
             std::fprintf(
                 stderr,
-                "%s found %s %.2f: rotation %.2f deg (tilt %.2f, truth's %.2f), across %.2f mm, along %.2f "
+                "%s found %s %.2f: rotation %.2f deg (raw %.2f; tilt %.2f, truth's %.2f), across %.2f mm, along %.2f "
                 "mm, rms %.2f px\n",
                 c.name.c_str(), t.model.c_str(), t.visible_fraction, o.rotation_error_rad * 180 / kPi,
+                vision::SymmetricRotationError(t.world_T_object.rotation, r.raw_world_T_object.rotation,
+                                               vision::BoxSymmetries(truth->model_sizes_m.at(t.model))) * 180 / kPi,
                 tilt_deg(r.world_T_object.rotation), tilt_deg(t.world_T_object.rotation),
                 o.position_error.across_m * 1000, o.position_error.along_m * 1000, r.reprojection_rms_px);
           }
