@@ -315,8 +315,8 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
   cv::cvtColor(c.image, out, cv::COLOR_GRAY2BGR);
   // A box's visible edges into `image`, through the lens; `at` maps an image pixel to image's.
   const auto identity = [](const Eigen::Vector2d& p) { return cv::Point2d(p.x(), p.y()); };
-  auto draw_into = [&](cv::Mat& image, const auto& at, const std::string& model, const geometry::Pose3& world_T_object,
-                       const cv::Scalar& colour) {
+  auto draw_into = [&](cv::Mat& image, const auto& at, const std::string& model,
+                       const geometry::Pose3& world_T_object, const cv::Scalar& colour) {
     const Eigen::Vector3d size = sizes.at(model);
     const geometry::Pose3 camera_T_object = camera.camera_T_world() * world_T_object;
     const std::uint16_t visible = vision::VisibleBoxEdges(size, camera_T_object.Inverse().translation);
@@ -370,8 +370,8 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
     if (!centre) continue;
     const double depth_m = std::max(0.05, (camera.camera_T_world() * t.world_T_object.translation).z());
     const int half = static_cast<int>(0.7 * sizes.at(t.model).norm() * camera.intrinsics().fx / depth_m) + 10;
-    const cv::Rect roi = cv::Rect(static_cast<int>(centre->x()) - half, static_cast<int>(centre->y()) - half, 2 * half,
-                                  2 * half) &
+    const cv::Rect roi = cv::Rect(static_cast<int>(centre->x()) - half, static_cast<int>(centre->y()) - half,
+                                  2 * half, 2 * half) &
                          cv::Rect(0, 0, out.cols, out.rows);
     if (roi.width < 8 || roi.height < 8) continue;
     cv::Mat grey, close;
@@ -389,7 +389,8 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
       cv::line(close, zoomed(l.a), zoomed(l.b), cv::Scalar(0, 220, 255), 1, cv::LINE_AA);
     }
     for (const vision::ImageCorner& k : corners) {
-      for (const Eigen::Vector2d& arm : k.arm_end) cv::line(close, zoomed(k.point), zoomed(arm), cv::Scalar(255, 0, 255), 1);
+      for (const Eigen::Vector2d& arm : k.arm_end)
+        cv::line(close, zoomed(k.point), zoomed(arm), cv::Scalar(255, 0, 255), 1);
       cv::circle(close, zoomed(k.point), 4, cv::Scalar(255, 0, 255), 1);
     }
     cv::imwrite(stem + "." + t.model + ".png", close);
@@ -466,7 +467,8 @@ void AppendFeatures(const std::string& path, const std::string& set_name, const 
         fitted.accepted ? 1 : 0, best, visible, e.matched_fraction, e.support_fraction, e.coverage,
         e.supported_px, e.rms_px, e.rms_closest_px, e.matches, e.continued_ends, e.long_continued_ends,
         e.fixed_share, e.free_support_fraction, e.free_coverage, e.free_supported_px, e.polarity,
-        e.edges_supported, e.edges_visible, vision::EvidenceScore(e), e.step_supported_px, centre.x(), centre.y());
+        e.edges_supported, e.edges_visible, vision::EvidenceScore(e), e.step_supported_px, centre.x(),
+        centre.y());
   }
   std::fclose(f);
 }
@@ -672,30 +674,33 @@ int Run(const BenchArgs& args) {
               lowest = std::min(
                   lowest, (r.world_T_object * vision::BoxVertex(truth->model_sizes_m.at(r.model), v)).z());
             }
-            std::fprintf(
-                stderr,
-                "%s false %s at (%.0f, %.0f) world (%.1f, %.1f, %.1f) mm, lowest point %.1f mm: score %.2f, matched "
-                "%.2f, rms %.2f px\n",
-                c.name.c_str(), r.model.c_str(), p ? p->x() : -1, p ? p->y() : -1,
-                1000 * r.world_T_object.translation.x(), 1000 * r.world_T_object.translation.y(),
-                1000 * r.world_T_object.translation.z(), lowest * 1000, r.score, r.matched_edge_fraction,
-                r.reprojection_rms_px);
+            std::fprintf(stderr,
+                         "%s false %s at (%.0f, %.0f) world (%.1f, %.1f, %.1f) mm, lowest point %.1f mm: "
+                         "score %.2f, matched "
+                         "%.2f, rms %.2f px\n",
+                         c.name.c_str(), r.model.c_str(), p ? p->x() : -1, p ? p->y() : -1,
+                         1000 * r.world_T_object.translation.x(), 1000 * r.world_T_object.translation.y(),
+                         1000 * r.world_T_object.translation.z(), lowest * 1000, r.score,
+                         r.matched_edge_fraction, r.reprojection_rms_px);
             // The nearest true block of the same model, if any: how far off this one is.
+            auto away_m = [&](const vision::TruthObject& t) {
+              return (t.world_T_object.translation - r.world_T_object.translation).norm();
+            };
             const vision::TruthObject* nearest = nullptr;
             for (const vision::TruthObject& t : c.truth) {
-              if (t.model == r.model && (nearest == nullptr || (t.world_T_object.translation - r.world_T_object.translation).norm() <
-                                                                   (nearest->world_T_object.translation - r.world_T_object.translation).norm())) {
-                nearest = &t;
-              }
+              if (t.model == r.model && (nearest == nullptr || away_m(t) < away_m(*nearest))) nearest = &t;
             }
             if (nearest != nullptr) {
-              std::fprintf(stderr,
-                           "    nearest true %s: %.1f mm away (raw pose %.1f mm), turned %.1f deg (tilt %.2f, truth's %.2f)\n",
-                           r.model.c_str(), 1000 * (nearest->world_T_object.translation - r.world_T_object.translation).norm(),
-                           1000 * (nearest->world_T_object.translation - r.raw_world_T_object.translation).norm(),
-                           vision::SymmetricRotationError(nearest->world_T_object.rotation, r.world_T_object.rotation,
-                                                          vision::BoxSymmetries(truth->model_sizes_m.at(r.model))) * 180 / kPi,
-                           tilt_deg(r.world_T_object.rotation), tilt_deg(nearest->world_T_object.rotation));
+              std::fprintf(
+                  stderr,
+                  "    nearest true %s: %.1f mm away (raw pose %.1f mm), turned %.1f deg (tilt %.2f, truth's "
+                  "%.2f)\n",
+                  r.model.c_str(), 1000 * away_m(*nearest),
+                  1000 * (nearest->world_T_object.translation - r.raw_world_T_object.translation).norm(),
+                  vision::SymmetricRotationError(nearest->world_T_object.rotation, r.world_T_object.rotation,
+                                                 vision::BoxSymmetries(truth->model_sizes_m.at(r.model))) *
+                      180 / kPi,
+                  tilt_deg(r.world_T_object.rotation), tilt_deg(nearest->world_T_object.rotation));
             }
             for (const std::string& a : r.adjustments) std::fprintf(stderr, "    editor: %s\n", a.c_str());
           }
@@ -705,11 +710,13 @@ int Run(const BenchArgs& args) {
             const vision::Recognition& r = recognized->objects[static_cast<std::size_t>(o.detection)];
             std::fprintf(
                 stderr,
-                "%s found %s %.2f: rotation %.2f deg (raw %.2f; tilt %.2f, truth's %.2f), across %.2f mm, along %.2f "
+                "%s found %s %.2f: rotation %.2f deg (raw %.2f; tilt %.2f, truth's %.2f), across %.2f mm, "
+                "along %.2f "
                 "mm, rms %.2f px\n",
                 c.name.c_str(), t.model.c_str(), t.visible_fraction, o.rotation_error_rad * 180 / kPi,
                 vision::SymmetricRotationError(t.world_T_object.rotation, r.raw_world_T_object.rotation,
-                                               vision::BoxSymmetries(truth->model_sizes_m.at(t.model))) * 180 / kPi,
+                                               vision::BoxSymmetries(truth->model_sizes_m.at(t.model))) *
+                    180 / kPi,
                 tilt_deg(r.world_T_object.rotation), tilt_deg(t.world_T_object.rotation),
                 o.position_error.across_m * 1000, o.position_error.along_m * 1000, r.reprojection_rms_px);
           }
