@@ -19,7 +19,7 @@
 // it); TEACHSIM_RECOGNIZE_ABLATION runs the recognizer with options changed, several separated by
 // commas (see ApplyAblation: no-support, plane-only, no-polish, no-refit, rules-only, index-N, support-N,
 // contrast-X, score-X, evidence-X, accept-X, below-MM, canny-X (both thresholds times X), cannylow-X,
-// cannyhigh-X, checks-N, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX,
+// cannyhigh-X, eps-X, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX,
 // stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX, alternatives-N (0: no other models
 // fitted at the candidates' places), refitrms-PX, refitcoverage-X, refitscore-X (the edge-point refit's
 // limits; no-refit switches it off), balance-N (the non-maximum suppression's pairwise margin; 0: off).
@@ -522,7 +522,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, no-refit, rules-only, index-N, support-N, "
            "contrast-X, "
-           "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, checks-N, "
+           "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, eps-X, "
            "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
            "stepgrey-X, stepoffset-PX, alternatives-N, refitrms-PX, refitcoverage-X, refitscore-X, "
            "balance-N)";
