@@ -91,6 +91,7 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(positive("refit_max_rms_px", refit_max_rms_px));
   TEACHSIM_RETURN_IF_ERROR(fraction("refit_min_coverage", refit_min_coverage));
   TEACHSIM_RETURN_IF_ERROR(fraction("refit_accept_score", refit_accept_score));
+  TEACHSIM_RETURN_IF_ERROR(fraction("refit_min_in_image", refit_min_in_image));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_evidence_score", min_evidence_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("accept_evidence_score", accept_evidence_score));
   if (accept_evidence_score < min_evidence_score) {
@@ -806,16 +807,6 @@ struct FixedPart {
   std::vector<Eigen::Vector3d> normals, edge_dirs;
 };
 
-// Whether every corner of the box projects into the image: a block cut by the image border shows
-// only part of its outline, and what is left says too little for the edge-point refit.
-bool InImageWhole(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object) {
-  for (int i = 0; i < 8; ++i) {
-    const auto px = camera.ProjectFromCamera(camera_T_object * BoxVertex(model.box_size_m, i));
-    if (!px || !camera.InImage(*px)) return false;
-  }
-  return true;
-}
-
 double LowestZ(const Model& model, const geometry::Pose3& world_T_object) {
   double z = 1e9;
   for (const Eigen::Vector3d& v : BoxWorldVertices(model, world_T_object)) z = std::min(z, v.z());
@@ -1001,6 +992,28 @@ double EvidenceScore(const PoseEvidence& e) {
   return 1 / (1 + std::exp(-z));
 }
 
+double VisibleOutlineInImage(const Model& model, const Camera& camera,
+                             const geometry::Pose3& camera_T_object) {
+  const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
+  const Eigen::Matrix3d K = camera.K();
+  int inside = 0, total = 0;
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    const Eigen::Vector3d a =
+        camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[static_cast<size_t>(e)][0]);
+    const Eigen::Vector3d b =
+        camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[static_cast<size_t>(e)][1]);
+    if (a.z() <= 0.05 || b.z() <= 0.05) return 0;
+    const int n = std::max(1, static_cast<int>(((K * a).hnormalized() - (K * b).hnormalized()).norm() / 2));
+    for (int i = 0; i < n; ++i) {
+      const auto px = camera.ProjectFromCamera(a + (i + 0.5) / n * (b - a));
+      inside += px && camera.InImage(*px) ? 1 : 0;
+      ++total;
+    }
+  }
+  return total > 0 ? static_cast<double>(inside) / total : 0;
+}
+
 std::optional<PolishResult> RefitOnEdgePoints(const Model& model, const Camera& camera,
                                               const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
                                               double table_top_z, const RecognizerOptions& options) {
@@ -1012,7 +1025,7 @@ std::optional<PolishResult> RefitOnEdgePoints(const Model& model, const Camera& 
   }
   const PolishResult polished = PolishPose(model, camera, camera_T_object, edge_map, false);
   if (!polished.ok || polished.rms_px > options.refit_max_rms_px ||
-      !InImageWhole(model, camera, polished.fit.camera_T_object) ||
+      VisibleOutlineInImage(model, camera, polished.fit.camera_T_object) < options.refit_min_in_image ||
       !RestsOnTable(model, camera.world_T_camera() * polished.fit.camera_T_object, table_top_z,
                     options.table_snap_distance_m, options.table_snap_max_tilt_deg)) {
     return std::nullopt;

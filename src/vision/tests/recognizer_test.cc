@@ -157,7 +157,7 @@ TEST(PoseFitTest, PolishOnEdgePointsRecoversAPoseOnTheTable) {
 // line beside an edge leaves it), the 6-DOF fit on the edge points comes back onto the rendered block;
 // it is refused for a block lifted off the table, for one that the image border cuts, and where the
 // image shows no block.
-TEST(PoseFitTest, TheEdgePointRefitAcceptsOnlyAWholeBlockOnTheTable) {
+TEST(PoseFitTest, TheEdgePointRefitAcceptsOnlyABlockOnTheTableMostlyInTheImage) {
   const Camera camera = SyntheticCamera();
   const Model bar = Bar();
   const RecognizerOptions options;
@@ -192,16 +192,38 @@ TEST(PoseFitTest, TheEdgePointRefitAcceptsOnlyAWholeBlockOnTheTable) {
                                 DetectLinesAndEdges(lifted_image, camera, options).edge_map, 0.03, options)
                   .has_value())
       << "on a support 3 cm high it rests";
-  // A block whose far end is outside the image (the image's left border cuts it).
-  geometry::Pose3 at_border = truth;
-  while (camera.Project(at_border * BoxVertex(bar.box_size_m, 0))->x() > -20 &&
-         camera.Project(at_border.translation)->x() > 25) {
-    at_border.translation += Eigen::Vector3d(-0.004, -0.004, 0);  // towards the image's left
-  }
-  const cv::Mat border_image = RenderBoxes(camera, {{bar.box_size_m, at_border}}, 13);
-  EXPECT_FALSE(RefitOnEdgePoints(bar, camera, camera.camera_T_world() * at_border,
-                                 DetectLinesAndEdges(border_image, camera, options).edge_map, 0, options)
-                   .has_value());
+  // Blocks cut by the image's left border: refitted while at least refit_min_in_image of the visible
+  // outline is inside the image, not when less is.
+  EXPECT_DOUBLE_EQ(VisibleOutlineInImage(bar, camera, camera.camera_T_world() * truth), 1);
+  auto cut_to = [&](double share) {
+    geometry::Pose3 pose = truth;
+    while (VisibleOutlineInImage(bar, camera, camera.camera_T_world() * pose) > share) {
+      pose.translation += Eigen::Vector3d(-0.001, -0.001, 0);  // towards the image's left
+    }
+    return pose;
+  };
+  auto refit_at = [&](const geometry::Pose3& pose, const RecognizerOptions& o) {
+    const cv::Mat cut_image = RenderBoxes(camera, {{bar.box_size_m, pose}}, 13);
+    return RefitOnEdgePoints(bar, camera, camera.camera_T_world() * pose,
+                             DetectLinesAndEdges(cut_image, camera, o).edge_map, 0, o)
+        .has_value();
+  };
+  const geometry::Pose3 little_cut = cut_to(0.92);
+  EXPECT_GT(VisibleOutlineInImage(bar, camera, camera.camera_T_world() * little_cut), 0.85);
+  EXPECT_TRUE(refit_at(little_cut, options)) << "92 % of its outline in the image";
+  RecognizerOptions whole = options;
+  whole.refit_min_in_image = 1;
+  EXPECT_FALSE(refit_at(little_cut, whole)) << "the whole outline required";
+  const geometry::Pose3 far_cut = cut_to(0.6);
+  EXPECT_GT(VisibleOutlineInImage(bar, camera, camera.camera_T_world() * far_cut), 0.5);
+  EXPECT_FALSE(refit_at(far_cut, options)) << "60 % of its outline in the image";
+  RecognizerOptions loose = options;
+  loose.refit_min_in_image = 0.5;
+  EXPECT_TRUE(refit_at(far_cut, loose)) << "rejected for the share alone";
+  // Behind the camera: nothing in the image.
+  EXPECT_EQ(VisibleOutlineInImage(bar, camera,
+                                  geometry::Pose3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, -1))),
+            0);
   // Where the image shows nothing.
   const geometry::Pose3 elsewhere = OnTable(bar.box_size_m, -0.15, 0.12, 0.4);
   EXPECT_FALSE(
@@ -260,6 +282,9 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o = RecognizerOptions();
   o.refit_min_coverage = -0.1;
   EXPECT_NE(o.Validate().message().find("refit_min_coverage"), std::string::npos);
+  o = RecognizerOptions();
+  o.refit_min_in_image = 1.5;
+  EXPECT_NE(o.Validate().message().find("refit_min_in_image = 1.5 must be in [0, 1]"), std::string::npos);
   o = RecognizerOptions();
   o.conflict_balance_margin = -1;
   EXPECT_NE(o.Validate().message().find("conflict_balance_margin = -1 must be >= 0"), std::string::npos);

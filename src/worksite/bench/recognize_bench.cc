@@ -21,9 +21,9 @@
 // contrast-X, score-X, evidence-X, accept-X, below-MM, canny-X (both thresholds times X), cannylow-X,
 // cannyhigh-X, eps-X, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX,
 // stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX, alternatives-N (0: no other models
-// fitted at the candidates' places), refitrms-PX, refitcoverage-X, refitscore-X (the edge-point refit's
-// limits; no-refit switches it off), balance-N (the non-maximum suppression's pairwise margin; 0: off).
-// For teachsim, every scored object is put down to the stage that lost it
+// fitted at the candidates' places), refitrms-PX, refitcoverage-X, refitscore-X, refitinimage-X (the
+// edge-point refit's limits; no-refit switches it off), balance-N (the non-maximum suppression's pairwise
+// margin; 0: off). For teachsim, every scored object is put down to the stage that lost it
 // (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
 
@@ -516,6 +516,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"refitrms", [o](double v) { o->refit_max_rms_px = v; }},
       {"refitcoverage", [o](double v) { o->refit_min_coverage = v; }},
       {"refitscore", [o](double v) { o->refit_accept_score = v; }},
+      {"refitinimage", [o](double v) { o->refit_min_in_image = v; }},
       {"balance", [o](double v) { o->conflict_balance_margin = static_cast<int>(v); }},
   };
   const auto setter = setters.find(name);
@@ -525,6 +526,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, eps-X, "
            "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
            "stepgrey-X, stepoffset-PX, alternatives-N, refitrms-PX, refitcoverage-X, refitscore-X, "
+           "refitinimage-X, "
            "balance-N)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
