@@ -105,23 +105,23 @@ struct RecognizerOptions {
   double max_reprojection_rms_px = 1.0;      // matched segments' RMS distance to predicted edges, px (above 1 px the
                                              // dev set's recognitions were the right block but up to 2 deg off)
   // The edge-point refit, a second chance for a pose rejected with its matched lines farther from its
-  // predicted edges than max_reprojection_rms_px (a grain line or shadow beside an edge was matched,
-  // or the edge's own line was broken up): when its outline is otherwise supported (edge support >=
-  // min_score, coverage >= refit_min_coverage, the step rule) and its evidence score could reach
-  // refit_accept_score with no residual at all, it is fitted again in 6 DOF on the image's edge points
-  // along its outline (RefitOnEdgePoints). A refitted box with at least refit_min_in_image of its
-  // visible outline inside the image (VisibleOutlineInImage: a block cut far by the image border
-  // shows too little of it), that rests on the table and whose edge points lie within
-  // refit_max_rms_px of its edges is judged again with that RMS and accepted when it passes the rules and
-  // scores >= refit_accept_score (the selection ranks it by its score with its lines' RMS, as any other
-  // pose). Benchmark renders, seeds 7-25: 3390 -> 3425 of 3657 blocks found, false detections 55 -> 57 in
-  // 1140 images; fresh seeds 26-31: 996 -> 1005 of 1081, 26 -> 26 in 360 (docs/benchmarks.md).
-  // refit_accept_score 0.9 -> 0.8 (session 14, chosen on seeds 7-12): seeds 13-31 3372 -> 3383 of 3610 found,
-  // 70 -> 79 of 277 half hidden, 67
-  // -> 67 false detections in 1140 images; the dev set unchanged. refit_min_in_image 0.8 instead of
-  // every corner in the image (session 15): seeds 7-31 4449 -> 4459 of 4738 found, 98 -> 101 of 372
-  // half hidden, false detections 79 -> 79 in 1500 images (0.5, on seeds 7-30: 3 more found >= 0.7
-  // visible, 4 more false).
+  // predicted edges than max_reprojection_rms_px (a grain line or shadow beside an edge was matched, or
+  // the edge's own line was broken up): when its outline is otherwise supported (edge support >=
+  // min_score, coverage >= refit_min_coverage) and its evidence score could reach refit_accept_score
+  // with no residual at all, it is fitted again in 6 DOF on the image's edge points along its outline
+  // (RefitOnEdgePoints). A refitted box with at least refit_min_in_image of its visible outline inside
+  // the image (VisibleOutlineInImage: a block cut far by the image border shows too little of it), that
+  // rests on the table and whose edge points lie within refit_max_rms_px of its edges is judged again
+  // with that RMS and accepted when it passes the rules (the step rule among them) and scores >=
+  // refit_accept_score (the selection ranks it by its score with its lines' RMS, as any other pose).
+  // Benchmark renders, seeds 7-25: 3390 -> 3425 of 3657 blocks found, false detections 55 -> 57 in 1140
+  // images; fresh seeds 26-31: 996 -> 1005 of 1081, 26 -> 26 in 360 (docs/benchmarks.md).
+  // refit_accept_score 0.9 -> 0.8 (session 14, chosen on seeds 7-12): seeds 13-31 3372 -> 3383 of 3610
+  // found, 70 -> 79 of 277 half hidden, 67 -> 67 false detections in 1140 images; the dev set
+  // unchanged. refit_min_in_image 0.8 instead of every corner in the image (session 15): seeds 7-31
+  // 4449 -> 4459 of 4738 found, 98 -> 101 of 372 half hidden, false detections 79 -> 79 in 1500 images
+  // (0.5, on seeds 7-30: 3 more found >= 0.7 visible, 4 more false). The step rule judged on the
+  // refitted pose only, not also on the line fit's (session 15): 4459 -> 4463, 101 -> 102, 79 -> 79.
   bool edge_point_refit = true;
   double refit_max_rms_px = 0.7;
   double refit_min_coverage = 0.5;
