@@ -208,18 +208,19 @@ TEST(PoseFitTest, TheEdgePointRefitAcceptsOnlyABlockOnTheTableMostlyInTheImage) 
                              DetectLinesAndEdges(cut_image, camera, o).edge_map, 0, o)
         .has_value();
   };
-  const geometry::Pose3 little_cut = cut_to(0.92);
-  EXPECT_GT(VisibleOutlineInImage(bar, camera, camera.camera_T_world() * little_cut), 0.85);
-  EXPECT_TRUE(refit_at(little_cut, options)) << "92 % of its outline in the image";
-  RecognizerOptions whole = options;
-  whole.refit_min_in_image = 1;
-  EXPECT_FALSE(refit_at(little_cut, whole)) << "the whole outline required";
-  const geometry::Pose3 far_cut = cut_to(0.6);
-  EXPECT_GT(VisibleOutlineInImage(bar, camera, camera.camera_T_world() * far_cut), 0.5);
-  EXPECT_FALSE(refit_at(far_cut, options)) << "60 % of its outline in the image";
-  RecognizerOptions loose = options;
-  loose.refit_min_in_image = 0.5;
-  EXPECT_TRUE(refit_at(far_cut, loose)) << "rejected for the share alone";
+  struct Cut {
+    double share, min_in_image;
+    bool refitted;
+  };
+  for (const Cut& c :
+       {Cut{0.92, 0.8, true}, Cut{0.92, 1, false}, Cut{0.6, 0.8, false}, Cut{0.6, 0.5, true}}) {
+    const geometry::Pose3 pose = cut_to(c.share);
+    EXPECT_GT(VisibleOutlineInImage(bar, camera, camera.camera_T_world() * pose), c.share - 0.07);
+    RecognizerOptions o = options;
+    o.refit_min_in_image = c.min_in_image;
+    EXPECT_EQ(refit_at(pose, o), c.refitted)
+        << c.share << " of its outline in the image, " << c.min_in_image << " required";
+  }
   // Behind the camera: nothing in the image.
   EXPECT_EQ(VisibleOutlineInImage(bar, camera,
                                   geometry::Pose3(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, -1))),
