@@ -193,13 +193,13 @@ PolishResult PolishPose(const Model& model, const Camera& camera, const geometry
 double VisibleOutlineInImage(const Model& model, const Camera& camera,
                              const geometry::Pose3& camera_T_object);
 
-// Verification's edge-point refit (RecognizerOptions::edge_point_refit): a fitted pose whose matched
-// lines lie off its predicted edges (a grain line or a shadow beside an edge was matched) polished in
-// 6 DOF on the image's edge points (PolishPose). The refitted pose when at least refit_min_in_image
-// of its visible predicted outline projects into the image (VisibleOutlineInImage), it rests on the table
-// (lowest point within table_snap_distance_m of table_top_z, a face within table_snap_max_tilt_deg of level)
-// and its edge points' RMS is within refit_max_rms_px; nullopt otherwise (without polishing when the pose is
-// not within twice those tolerances of resting on the table to begin with: the polish moves the outline by 2
+// Verification's edge-point refit (RecognizerOptions::edge_point_refit): a fitted pose whose matched lines
+// lie off its predicted edges (a grain line or a shadow beside an edge was matched) polished in 6 DOF on
+// the image's edge points (PolishPose). The refitted pose when at least refit_min_in_image of its visible
+// predicted outline projects into the image (VisibleOutlineInImage), it rests on the table (lowest point
+// within table_snap_distance_m of table_top_z, a face within table_snap_max_tilt_deg of level) and its
+// edge points' RMS is within refit_max_rms_px; nullopt otherwise (without polishing when the pose is not
+// within twice those tolerances of resting on the table to begin with: the polish moves the outline by 2
 // px at most).
 std::optional<PolishResult> RefitOnEdgePoints(const Model& model, const Camera& camera,
                                               const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
