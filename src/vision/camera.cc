@@ -64,10 +64,6 @@ Eigen::Matrix3d Camera::K() const {
   return k;
 }
 
-bool Camera::InImage(const Eigen::Vector2d& pixel) const {
-  return pixel.x() >= -0.5 && pixel.y() >= -0.5 && pixel.x() < width_ - 0.5 && pixel.y() < height_ - 0.5;
-}
-
 namespace {
 
 // Brown-Conrady distortion of normalized coordinates n and, where `jacobian` is given, its

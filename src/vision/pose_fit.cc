@@ -124,9 +124,8 @@ FitResult FitLm(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const g
   if (matches.empty()) return out;
   const Eigen::Matrix3d K_inv_t = K.inverse().transpose();
   const Eigen::Index m = static_cast<Eigen::Index>(2 * matches.size());
-  Eigen::VectorXd r(m), rp(m), w(m);
+  Eigen::VectorXd r(m), rp(m);
   Eigen::Matrix<double, Eigen::Dynamic, 6> J6(m, 6);
-  Eigen::Matrix<double, Eigen::Dynamic, N> J(m, N);
 
   auto cost = [&](const Eigen::VectorXd& res) {
     double c = 0;
@@ -141,10 +140,17 @@ FitResult FitLm(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const g
   for (int it = 0; it < max_iterations; ++it) {
     out.iterations = it + 1;
     Residuals(size_m, K_inv_t, pose, matches, &r, &J6);
-    J.noalias() = J6 * basis;
-    for (Eigen::Index i = 0; i < m; ++i) w(i) = LossWeight(r(i), loss);
-    const MatrixNd H = J.transpose() * w.asDiagonal() * J;
-    const VectorNd g = J.transpose() * (w.asDiagonal() * r);
+    // The weighted normal equations row by row, in fixed-size arithmetic (the dynamic-size products
+    // J^T W J were a fifth of the fit's time for its few dozen rows).
+    MatrixNd H = MatrixNd::Zero();
+    VectorNd g = VectorNd::Zero();
+    for (Eigen::Index i = 0; i < m; ++i) {
+      const double wi = LossWeight(r(i), loss);
+      if (wi == 0) continue;
+      const Eigen::Matrix<double, 1, N> row = J6.row(i) * basis;
+      H.noalias() += wi * row.transpose() * row;
+      g.noalias() += (wi * r(i)) * row.transpose();
+    }
     bool improved = false;
     const double before = current;
     VectorNd step = VectorNd::Zero();
@@ -190,12 +196,15 @@ Matrix6d Covariance(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, con
   Eigen::VectorXd r(m);
   Eigen::Matrix<double, Eigen::Dynamic, 6> J(m, 6);
   Residuals(size_m, K_inv_t, camera_T_object, matches, &r, &J);
-  Eigen::VectorXd w(m);
-  for (Eigen::Index i = 0; i < m; ++i) w(i) = LossWeight(r(i), loss);
-  const Matrix6d H = J.transpose() * w.asDiagonal() * J;
+  Matrix6d H = Matrix6d::Zero();
   double weighted = 0;
   int counted = 0;  // residuals with a weight (Tukey's rejected ones carry no information)
-  for (Eigen::Index i = 0; i < m; ++i) weighted += w(i) * r(i) * r(i), counted += w(i) > 0 ? 1 : 0;
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const double wi = LossWeight(r(i), loss);
+    if (wi == 0) continue;
+    H.noalias() += wi * J.row(i).transpose() * J.row(i);
+    weighted += wi * r(i) * r(i), ++counted;
+  }
   const double dof = std::max(1.0, counted - 6.0);
   // Floor at (0.1 px)^2: a noise-free fit would claim a zero covariance.
   const double sigma2 = std::max(weighted / dof, 0.01);

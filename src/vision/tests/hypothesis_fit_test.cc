@@ -337,7 +337,7 @@ TEST(HypothesisFitTest, TheDilatedEdgesAnswerEdgeQueriesAsTheEdgesDo) {
     }
     const int cx = static_cast<int>(std::floor(pixel.x() + 0.5)), cy = static_cast<int>(std::floor(pixel.y() + 0.5));
     if (cx < 0 || cy < 0 || cx >= camera.width() || cy >= camera.height()) continue;
-    if (!detection.edge_map.near.at<uint8_t>(cy, cx)) {
+    if (!NearEdge(detection.edge_map, cx, cy)) {
       ++blank;
     } else if (!EdgePixelAcross(plain, pixel, normal, kEdgeNearPx)) {
       ++beside;

@@ -60,7 +60,9 @@ class Camera {
   Eigen::Matrix3d K() const;
 
   // True when (u, v) lies on the image: [-0.5, width - 0.5) x [-0.5, height - 0.5).
-  bool InImage(const Eigen::Vector2d& pixel) const;
+  bool InImage(const Eigen::Vector2d& pixel) const {  // inline: the recognizer asks it per outline sample
+    return pixel.x() >= -0.5 && pixel.y() >= -0.5 && pixel.x() < width_ - 0.5 && pixel.y() < height_ - 0.5;
+  }
 
   // Lens model, normalized -> distorted (OpenCV's equations), and its 2x2 Jacobian.
   Eigen::Vector2d Distort(const Eigen::Vector2d& normalized) const;

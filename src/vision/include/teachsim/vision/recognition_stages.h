@@ -36,10 +36,15 @@ struct EdgeMap {
   cv::Mat gradient;   // CV_32FC2, unit gradient (x, y) at edge pixels, (0, 0) elsewhere
   cv::Mat magnitude;  // CV_32F, gradient magnitude (for sub-pixel edge positions)
   cv::Mat smoothed;   // CV_8U, the image after the Gaussian (contrast across predicted edges)
-  cv::Mat near;       // CV_8U, non-zero where a Canny edge pixel lies within kEdgeNearPx in x and y (the
-                      // edges dilated): a quick "no edge here" for EdgePixelAcross; empty: not used
+  cv::Mat near;       // CV_8U, one bit per pixel (bit x % 8 of byte x / 8 in row y), set where a Canny edge
+                      // pixel lies within kEdgeNearPx in x and y (the edges dilated): a quick "no edge
+                      // here" for EdgePixelAcross, small enough to stay in the cache; empty: not used
 };
 inline constexpr int kEdgeNearPx = 2;
+// EdgeMap::near at pixel (x, y), inside the image.
+inline bool NearEdge(const EdgeMap& edge_map, int x, int y) {
+  return (edge_map.near.ptr<uint8_t>(y)[x >> 3] >> (x & 7) & 1) != 0;
+}
 // The nearest Canny edge pixel across a predicted edge through `pixel` (distorted image; 0, +1,
 // -1, +2, -2, ... px along the unit `normal`, up to max_offset_px) whose gradient runs across the
 // edge (within 25 deg): what edge support (2 px) and the editor's fit on edge points (3 px) look for.
