@@ -68,6 +68,11 @@ Status RecognizerOptions::Validate() const {
     return Status::InvalidInput("RecognizerOptions::conflict_balance_margin = " +
                                 std::to_string(conflict_balance_margin) + " must be >= 0 (0: off)");
   }
+  if (!(conflict_own_lead >= 0)) {
+    return Status::InvalidInput("RecognizerOptions::conflict_own_lead = " +
+                                std::to_string(conflict_own_lead) + " must be >= 0 (0: off)");
+  }
+  TEACHSIM_RETURN_IF_ERROR(fraction("conflict_rank_share", conflict_rank_share));
   if (!(max_alternative_fits >= 0)) {
     return Status::InvalidInput("RecognizerOptions::max_alternative_fits = " +
                                 std::to_string(max_alternative_fits) + " must be >= 0 (0: none)");
@@ -969,6 +974,13 @@ int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object
   return balance;
 }
 
+bool ReplacesRival(int own, int rival_own, double rank, double rival_rank, const RecognizerOptions& options) {
+  if (options.conflict_balance_margin <= 0 || own < options.conflict_balance_margin) return false;
+  if (rival_own <= kRivalMaxOwnBalance) return true;
+  return options.conflict_own_lead > 0 && own - rival_own >= options.conflict_own_lead &&
+         rank >= options.conflict_rank_share * rival_rank;
+}
+
 PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                           const LineDetection& detection, const RecognizerOptions& options,
                           const FixedEdgeMap* fixed) {
@@ -1608,11 +1620,13 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
         const Candidate& o = candidates[accepted[k]];
         others.push_back({&models_.models[static_cast<size_t>(o.model)], o.camera_T_object});
       }
-      if (OwnOutlineBalance(mc, c.camera_T_object, others, camera, detection.edge_map, fixed_edges,
-                            options_) >= options_.conflict_balance_margin) {
+      const int own =
+          OwnOutlineBalance(mc, c.camera_T_object, others, camera, detection.edge_map, fixed_edges, options_);
+      if (own >= options_.conflict_balance_margin) {
         others.front() = {&mc, c.camera_T_object};
-        if (OwnOutlineBalance(ma, a.camera_T_object, others, camera, detection.edge_map, fixed_edges,
-                              options_) <= kRivalMaxOwnBalance) {
+        const int rival_own = OwnOutlineBalance(ma, a.camera_T_object, others, camera, detection.edge_map,
+                                                fixed_edges, options_);
+        if (ReplacesRival(own, rival_own, rank[i], rank[accepted[conflicts[0]]], options_)) {
           accepted[conflicts[0]] = i;
         }
       }

@@ -291,6 +291,13 @@ TEST(OptionsTest, ValidateNamesTheField) {
   EXPECT_NE(o.Validate().message().find("conflict_balance_margin = -1 must be >= 0"), std::string::npos);
   o.conflict_balance_margin = 0;  // off: valid
   EXPECT_TRUE(o.Validate().ok());
+  o.conflict_own_lead = -2;
+  EXPECT_NE(o.Validate().message().find("conflict_own_lead = -2 must be >= 0"), std::string::npos);
+  o.conflict_own_lead = 0;  // off: valid
+  EXPECT_TRUE(o.Validate().ok());
+  o.conflict_rank_share = 1.5;
+  EXPECT_NE(o.Validate().message().find("conflict_rank_share = 1.5 must be in [0, 1]"), std::string::npos);
+  o.conflict_rank_share = 0.8;
   o.index_search_eps = -0.5;
   EXPECT_NE(o.Validate().message().find("index_search_eps = -0.5 must be >= 0"), std::string::npos);
   o.index_search_eps = 0;  // exact: valid
@@ -679,6 +686,40 @@ TEST(SelectionTest, WhatTheRightModelPredictsAloneIsInTheImage) {
               bar_own);
     std::printf("yaw %.2f: bar image: bar's own %d, cube's own %d; cube image: cube's own %d, bar's own %d\n",
                 yaw, bar_own, cube_own, cube_alone, bar_alone);
+  }
+}
+
+// The selection's pairwise decision on the numbers it is given: a candidate whose own outline is
+// not in the image never replaces; one whose rival's own outline is not either does; where both own
+// outlines show, the candidate needs the lead and the rank share, and neither way works when switched
+// off.
+TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadAndRank) {
+  RecognizerOptions defaults;
+  defaults.conflict_balance_margin = 10;
+  defaults.conflict_own_lead = 10;
+  defaults.conflict_rank_share = 0.8;
+  RecognizerOptions no_lead = defaults;
+  no_lead.conflict_own_lead = 0;
+  RecognizerOptions off = defaults;
+  off.conflict_balance_margin = 0;
+  struct Case {
+    const char* what;
+    int own, rival_own;
+    double rank, rival_rank;
+    const RecognizerOptions& options;
+    bool replaces;
+  } cases[] = {
+      {"own outline under the margin", 9, -20, 300, 100, defaults, false},
+      {"rival's own outline not in the image", 10, 3, 50, 400, defaults, true},
+      {"both show, lead and rank share", 88, 73, 277.7, 285.0, defaults, true},
+      {"both show, lead exactly 10, rank share exactly 0.8", 40, 30, 80, 100, defaults, true},
+      {"both show, lead 9", 40, 31, 100, 100, defaults, false},
+      {"both show, rank share under 0.8", 31, 9, 72.9, 138.7, defaults, false},
+      {"both show, the lead switched off", 88, 73, 277.7, 285.0, no_lead, false},
+      {"the whole test switched off", 50, 0, 300, 100, off, false},
+  };
+  for (const Case& c : cases) {
+    EXPECT_EQ(ReplacesRival(c.own, c.rival_own, c.rank, c.rival_rank, c.options), c.replaces) << c.what;
   }
 }
 

@@ -23,8 +23,9 @@
 // stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX, alternatives-N (0: no other models
 // fitted at the candidates' places), refitrms-PX, refitcoverage-X, refitscore-X, refitinimage-X (the
 // edge-point refit's limits; no-refit switches it off), balance-N (the non-maximum suppression's pairwise
-// margin; 0: off). For teachsim, every scored object is put down to the stage that lost it
-// (vision::ClassifyLoss), per visible-fraction bin.
+// margin; 0: off), ownlead-N and rankshare-X (its second way to replace a rival; ownlead-0: off). For
+// teachsim, every scored object is put down to the stage that lost it (vision::ClassifyLoss), per
+// visible-fraction bin.
 #include <time.h>
 
 #include <algorithm>
@@ -518,6 +519,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"refitscore", [o](double v) { o->refit_accept_score = v; }},
       {"refitinimage", [o](double v) { o->refit_min_in_image = v; }},
       {"balance", [o](double v) { o->conflict_balance_margin = static_cast<int>(v); }},
+      {"ownlead", [o](double v) { o->conflict_own_lead = static_cast<int>(v); }},
+      {"rankshare", [o](double v) { o->conflict_rank_share = v; }},
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
@@ -527,7 +530,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
            "stepgrey-X, stepoffset-PX, alternatives-N, refitrms-PX, refitcoverage-X, refitscore-X, "
            "refitinimage-X, "
-           "balance-N)";
+           "balance-N, ownlead-N, rankshare-X)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);

@@ -142,6 +142,14 @@ struct RecognizerOptions {
   // renders of seeds 20-31, which it was not chosen on: 2110 / 2262 >= 0.7 visible found either way,
   // 0.4-0.7 46 -> 48 of 183, false detections 46 -> 44 in 720 images (docs/benchmarks.md).
   int conflict_balance_margin = 10;
+  // The same test's second way to replace the rival, where both own outlines show in the image (a
+  // grain line under the wrong model's own edges; ReplacesRival): the candidate's own balance leads
+  // the rival's by this many samples and its rank (net edge support times evidence score) is at
+  // least conflict_rank_share of the rival's. 0: off. Chosen on the renders of seeds 7-19 from the
+  // traced pairwise tests; on seeds 20-31, which it was not chosen on, it added 5 replacements of a
+  // wrong rival by the right model and none the other way (docs/benchmarks.md, session 16).
+  int conflict_own_lead = 10;
+  double conflict_rank_share = 0.8;
   double work_area_radius_m = 0.6;           // poses farther than this from the world origin (in x, y) are culled, m
   double below_table_tolerance_m = 0.010;    // poses whose box reaches deeper under z = 0 are culled, m (a raw
                                              // fit is weakest along the camera ray, and the editor lifts what is
