@@ -109,6 +109,34 @@ double LossWeight(double r, const RobustLoss& loss) {
   return u * u;
 }
 
+// The robustly weighted normal equations J^T W J, J^T W r of the residuals r with Jacobian J6 (pose
+// perturbation) restricted to the columns of `basis`, summed row by row in fixed-size arithmetic
+// (the dynamic-size products were a fifth of the fit's time for its few dozen rows); and the
+// weighted sum of squares over the residuals with a weight, and their count.
+template <int N>
+struct NormalEquations {
+  Eigen::Matrix<double, N, N> H = Eigen::Matrix<double, N, N>::Zero();
+  Eigen::Matrix<double, N, 1> g = Eigen::Matrix<double, N, 1>::Zero();
+  double weighted_squares = 0;
+  int counted = 0;
+};
+template <int N>
+NormalEquations<N> WeightedNormalEquations(const Eigen::Matrix<double, Eigen::Dynamic, 6>& J6,
+                                           const Eigen::VectorXd& r, const RobustLoss& loss,
+                                           const Eigen::Matrix<double, 6, N>& basis) {
+  NormalEquations<N> out;
+  for (Eigen::Index i = 0; i < r.size(); ++i) {
+    const double wi = LossWeight(r(i), loss);
+    if (wi == 0) continue;
+    const Eigen::Matrix<double, 1, N> row = J6.row(i) * basis;
+    out.H.noalias() += wi * row.transpose() * row;
+    out.g.noalias() += (wi * r(i)) * row.transpose();
+    out.weighted_squares += wi * r(i) * r(i);
+    ++out.counted;
+  }
+  return out;
+}
+
 // Levenberg-damped Gauss-Newton with robust weights over N pose parameters: the 6-DOF perturbation
 // restricted to the columns of `basis` (6 x N; the identity for the free fit). Shared by the 6-DOF
 // fit and the 3-DOF fit on a support plane.
@@ -140,17 +168,9 @@ FitResult FitLm(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const g
   for (int it = 0; it < max_iterations; ++it) {
     out.iterations = it + 1;
     Residuals(size_m, K_inv_t, pose, matches, &r, &J6);
-    // The weighted normal equations row by row, in fixed-size arithmetic (the dynamic-size products
-    // J^T W J were a fifth of the fit's time for its few dozen rows).
-    MatrixNd H = MatrixNd::Zero();
-    VectorNd g = VectorNd::Zero();
-    for (Eigen::Index i = 0; i < m; ++i) {
-      const double wi = LossWeight(r(i), loss);
-      if (wi == 0) continue;
-      const Eigen::Matrix<double, 1, N> row = J6.row(i) * basis;
-      H.noalias() += wi * row.transpose() * row;
-      g.noalias() += (wi * r(i)) * row.transpose();
-    }
+    const NormalEquations<N> normal = WeightedNormalEquations<N>(J6, r, loss, basis);
+    const MatrixNd& H = normal.H;
+    const VectorNd& g = normal.g;
     bool improved = false;
     const double before = current;
     VectorNd step = VectorNd::Zero();
@@ -196,16 +216,11 @@ Matrix6d Covariance(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, con
   Eigen::VectorXd r(m);
   Eigen::Matrix<double, Eigen::Dynamic, 6> J(m, 6);
   Residuals(size_m, K_inv_t, camera_T_object, matches, &r, &J);
-  Matrix6d H = Matrix6d::Zero();
-  double weighted = 0;
-  int counted = 0;  // residuals with a weight (Tukey's rejected ones carry no information)
-  for (Eigen::Index i = 0; i < m; ++i) {
-    const double wi = LossWeight(r(i), loss);
-    if (wi == 0) continue;
-    H.noalias() += wi * J.row(i).transpose() * J.row(i);
-    weighted += wi * r(i) * r(i), ++counted;
-  }
-  const double dof = std::max(1.0, counted - 6.0);
+  const NormalEquations<6> normal = WeightedNormalEquations<6>(J, r, loss, Matrix6d::Identity());
+  const Matrix6d& H = normal.H;
+  // Residuals with a weight only (Tukey's rejected ones carry no information).
+  const double weighted = normal.weighted_squares;
+  const double dof = std::max(1.0, normal.counted - 6.0);
   // Floor at (0.1 px)^2: a noise-free fit would claim a zero covariance.
   const double sigma2 = std::max(weighted / dof, 0.01);
   Eigen::FullPivLU<Matrix6d> lu(H);
