@@ -73,6 +73,8 @@ Status RecognizerOptions::Validate() const {
                                 std::to_string(conflict_own_lead) + " must be >= 0 (0: off)");
   }
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_rank_share", conflict_rank_share));
+  TEACHSIM_RETURN_IF_ERROR(fraction("conflict_in_image_lead", conflict_in_image_lead));
+  TEACHSIM_RETURN_IF_ERROR(fraction("conflict_tie_rank_share", conflict_tie_rank_share));
   if (!(max_alternative_fits >= 0)) {
     return Status::InvalidInput("RecognizerOptions::max_alternative_fits = " +
                                 std::to_string(max_alternative_fits) + " must be >= 0 (0: none)");
@@ -974,11 +976,18 @@ int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object
   return balance;
 }
 
-bool ReplacesRival(int own, int rival_own, double rank, double rival_rank, const RecognizerOptions& options) {
-  if (options.conflict_balance_margin <= 0 || own < options.conflict_balance_margin) return false;
-  if (rival_own <= kRivalMaxOwnBalance) return true;
-  return options.conflict_own_lead > 0 && own - rival_own >= options.conflict_own_lead &&
-         rank >= options.conflict_rank_share * rival_rank;
+bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival, const RecognizerOptions& options) {
+  const int margin = options.conflict_balance_margin;
+  if (margin <= 0) return false;
+  if (candidate.own >= margin) {
+    if (rival.own <= kRivalMaxOwnBalance) return true;
+    return options.conflict_own_lead > 0 && candidate.own - rival.own >= options.conflict_own_lead &&
+           candidate.rank >= options.conflict_rank_share * rival.rank;
+  }
+  // Neither own outline shows: the one more inside the image, at a close rank.
+  return options.conflict_in_image_lead > 0 && std::abs(candidate.own) < margin && std::abs(rival.own) < margin &&
+         candidate.in_image >= rival.in_image + options.conflict_in_image_lead &&
+         candidate.rank >= options.conflict_tie_rank_share * rival.rank;
 }
 
 PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
@@ -1620,16 +1629,14 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
         const Candidate& o = candidates[accepted[k]];
         others.push_back({&models_.models[static_cast<size_t>(o.model)], o.camera_T_object});
       }
-      const int own =
-          OwnOutlineBalance(mc, c.camera_T_object, others, camera, detection.edge_map, fixed_edges, options_);
-      if (own >= options_.conflict_balance_margin) {
-        others.front() = {&mc, c.camera_T_object};
-        const int rival_own = OwnOutlineBalance(ma, a.camera_T_object, others, camera, detection.edge_map,
-                                                fixed_edges, options_);
-        if (ReplacesRival(own, rival_own, rank[i], rank[accepted[conflicts[0]]], options_)) {
-          accepted[conflicts[0]] = i;
-        }
-      }
+      PairwiseSide own{OwnOutlineBalance(mc, c.camera_T_object, others, camera, detection.edge_map, fixed_edges,
+                                         options_),
+                       rank[i], VisibleOutlineInImage(mc, camera, c.camera_T_object)};
+      others.front() = {&mc, c.camera_T_object};
+      PairwiseSide rival{
+          OwnOutlineBalance(ma, a.camera_T_object, others, camera, detection.edge_map, fixed_edges, options_),
+          rank[accepted[conflicts[0]]], VisibleOutlineInImage(ma, camera, a.camera_T_object)};
+      if (ReplacesRival(own, rival, options_)) accepted[conflicts[0]] = i;
     }
   }
 

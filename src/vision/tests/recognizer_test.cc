@@ -298,6 +298,13 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o.conflict_rank_share = 1.5;
   EXPECT_NE(o.Validate().message().find("conflict_rank_share = 1.5 must be in [0, 1]"), std::string::npos);
   o.conflict_rank_share = 0.8;
+  o.conflict_in_image_lead = -0.1;
+  EXPECT_NE(o.Validate().message().find("conflict_in_image_lead = -0.1 must be in [0, 1]"), std::string::npos);
+  o.conflict_in_image_lead = 0;  // off: valid
+  EXPECT_TRUE(o.Validate().ok());
+  o.conflict_tie_rank_share = 2;
+  EXPECT_NE(o.Validate().message().find("conflict_tie_rank_share = 2 must be in [0, 1]"), std::string::npos);
+  o.conflict_tie_rank_share = 0.85;
   o.index_search_eps = -0.5;
   EXPECT_NE(o.Validate().message().find("index_search_eps = -0.5 must be >= 0"), std::string::npos);
   o.index_search_eps = 0;  // exact: valid
@@ -690,36 +697,48 @@ TEST(SelectionTest, WhatTheRightModelPredictsAloneIsInTheImage) {
 }
 
 // The selection's pairwise decision on the numbers it is given: a candidate whose own outline is
-// not in the image never replaces; one whose rival's own outline is not either does; where both own
-// outlines show, the candidate needs the lead and the rank share, and neither way works when switched
-// off.
-TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadAndRank) {
+// not in the image does not replace by evidence; one whose rival's own outline is not either does;
+// where both own outlines show, the candidate needs the lead and the rank share; where neither shows,
+// the one whose outline is more inside the image replaces at a close rank; no way works when
+// switched off.
+TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInImage) {
   RecognizerOptions defaults;
   defaults.conflict_balance_margin = 10;
   defaults.conflict_own_lead = 10;
   defaults.conflict_rank_share = 0.8;
+  defaults.conflict_in_image_lead = 0.1;
+  defaults.conflict_tie_rank_share = 0.85;
   RecognizerOptions no_lead = defaults;
   no_lead.conflict_own_lead = 0;
+  RecognizerOptions no_tie = defaults;
+  no_tie.conflict_in_image_lead = 0;
   RecognizerOptions off = defaults;
   off.conflict_balance_margin = 0;
   struct Case {
     const char* what;
-    int own, rival_own;
-    double rank, rival_rank;
+    PairwiseSide candidate, rival;
     const RecognizerOptions& options;
     bool replaces;
   } cases[] = {
-      {"own outline under the margin", 9, -20, 300, 100, defaults, false},
-      {"rival's own outline not in the image", 10, 3, 50, 400, defaults, true},
-      {"both show, lead and rank share", 88, 73, 277.7, 285.0, defaults, true},
-      {"both show, lead exactly 10, rank share exactly 0.8", 40, 30, 80, 100, defaults, true},
-      {"both show, lead 9", 40, 31, 100, 100, defaults, false},
-      {"both show, rank share under 0.8", 31, 9, 72.9, 138.7, defaults, false},
-      {"both show, the lead switched off", 88, 73, 277.7, 285.0, no_lead, false},
-      {"the whole test switched off", 50, 0, 300, 100, off, false},
+      {"own outline under the margin, rival's shows", {9, 300, 1.0}, {-20, 100, 0.5}, defaults, false},
+      {"rival's own outline not in the image", {10, 50, 1.0}, {3, 400, 1.0}, defaults, true},
+      {"both show, lead and rank share", {88, 277.7, 1.0}, {73, 285.0, 1.0}, defaults, true},
+      {"both show, lead exactly 10, rank share exactly 0.8", {40, 80, 1.0}, {30, 100, 1.0}, defaults, true},
+      {"both show, lead 9", {40, 100, 1.0}, {31, 100, 1.0}, defaults, false},
+      {"both show, rank share under 0.8", {31, 72.9, 1.0}, {9, 138.7, 1.0}, defaults, false},
+      {"both show, the lead switched off", {88, 277.7, 1.0}, {73, 285.0, 1.0}, no_lead, false},
+      {"neither shows, more inside the image, close rank", {2, 321.2, 0.647}, {0, 322.4, 0.490}, defaults, true},
+      {"neither shows, negative balances count as not showing", {-9, 100, 0.85}, {-9, 100, 0.7}, defaults, true},
+      {"neither shows, in-image lead under 0.1", {0, 400, 0.79}, {0, 400, 0.70}, defaults, false},
+      {"neither shows, rank share under 0.85", {0, 213.1, 0.858}, {0, 287.3, 0.571}, defaults, false},
+      {"neither shows, the rival more inside the image", {0, 400, 0.5}, {0, 300, 1.0}, defaults, false},
+      {"the rival's own outline shows", {0, 400, 1.0}, {10, 300, 0.5}, defaults, false},
+      {"neither shows, the in-image rule switched off", {2, 321.2, 0.647}, {0, 322.4, 0.490}, no_tie, false},
+      {"the whole test switched off", {50, 300, 1.0}, {0, 100, 0.5}, off, false},
+      {"the whole test switched off, neither shows", {0, 300, 1.0}, {0, 300, 0.5}, off, false},
   };
   for (const Case& c : cases) {
-    EXPECT_EQ(ReplacesRival(c.own, c.rival_own, c.rank, c.rival_rank, c.options), c.replaces) << c.what;
+    EXPECT_EQ(ReplacesRival(c.candidate, c.rival, c.options), c.replaces) << c.what;
   }
 }
 

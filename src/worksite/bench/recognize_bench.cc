@@ -23,7 +23,8 @@
 // stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX, alternatives-N (0: no other models
 // fitted at the candidates' places), refitrms-PX, refitcoverage-X, refitscore-X, refitinimage-X (the
 // edge-point refit's limits; no-refit switches it off), balance-N (the non-maximum suppression's pairwise
-// margin; 0: off), ownlead-N and rankshare-X (its second way to replace a rival; ownlead-0: off). For
+// margin; 0: off), ownlead-N and rankshare-X (its second way to replace a rival; ownlead-0: off),
+// inimagelead-X and tieshare-X (its third way, where neither own outline shows; inimagelead-0: off). For
 // teachsim, every scored object is put down to the stage that lost it (vision::ClassifyLoss), per
 // visible-fraction bin.
 #include <time.h>
@@ -521,6 +522,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"balance", [o](double v) { o->conflict_balance_margin = static_cast<int>(v); }},
       {"ownlead", [o](double v) { o->conflict_own_lead = static_cast<int>(v); }},
       {"rankshare", [o](double v) { o->conflict_rank_share = v; }},
+      {"inimagelead", [o](double v) { o->conflict_in_image_lead = v; }},
+      {"tieshare", [o](double v) { o->conflict_tie_rank_share = v; }},
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
@@ -530,7 +533,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
            "stepgrey-X, stepoffset-PX, alternatives-N, refitrms-PX, refitcoverage-X, refitscore-X, "
            "refitinimage-X, "
-           "balance-N, ownlead-N, rankshare-X)";
+           "balance-N, ownlead-N, rankshare-X, inimagelead-X, tieshare-X)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);

@@ -297,12 +297,21 @@ int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object
                       const std::vector<std::pair<const Model*, geometry::Pose3>>& others,
                       const Camera& camera, const EdgeMap& edge_map, const FixedEdgeMap& fixed,
                       const RecognizerOptions& options);
-// The selection's pairwise decision from the two own-outline balances and the two ranks (the
-// candidate's first): the candidate replaces its rival when its own balance reaches
+// One side of the selection's pairwise test: its own-outline balance (OwnOutlineBalance), its rank
+// (net edge support times evidence score) and the share of its visible outline inside the image
+// (VisibleOutlineInImage).
+struct PairwiseSide {
+  int own = 0;
+  double rank = 0;
+  double in_image = 1;
+};
+// The selection's pairwise decision: the candidate replaces its rival when its own balance reaches
 // RecognizerOptions::conflict_balance_margin and either the rival's own is at most 3 (nothing of it
 // alone is in the image), or the candidate's own leads the rival's by conflict_own_lead samples
-// while the candidate ranks at least conflict_rank_share of the rival.
-bool ReplacesRival(int own, int rival_own, double rank, double rival_rank, const RecognizerOptions& options);
+// while the candidate ranks at least conflict_rank_share of the rival; or, where neither own balance
+// reaches the margin (either sign), when a larger share of the candidate's outline is inside the
+// image by conflict_in_image_lead while it ranks at least conflict_tie_rank_share of the rival.
+bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival, const RecognizerOptions& options);
 struct PoseEvidence {
   double matched_fraction = 0;  // of the visible predicted edge length covered by matched lines
   double support_fraction = 0;  // of the informative sample points along the visible edges (an edge pixel

@@ -150,6 +150,16 @@ struct RecognizerOptions {
   // wrong rival by the right model and none the other way (docs/benchmarks.md, session 16).
   int conflict_own_lead = 10;
   double conflict_rank_share = 0.8;
+  // The same test's third way, where neither own outline shows (both balances under
+  // conflict_balance_margin: the image cannot tell the two apart, typically a longer model over a
+  // shorter block whose extra length would lie past the image border): the candidate replaces the
+  // rival when at least this larger a share of its visible outline lies inside the image
+  // (VisibleOutlineInImage; the smaller claim of what cannot be seen) and it ranks at least
+  // conflict_tie_rank_share of the rival. 0: off. Chosen from the traced pairwise tests of seeds
+  // 7-31: 5 replacements of a wrong rival by the right model, none the other way (docs/benchmarks.md,
+  // session 17).
+  double conflict_in_image_lead = 0.1;
+  double conflict_tie_rank_share = 0.85;
   double work_area_radius_m = 0.6;           // poses farther than this from the world origin (in x, y) are culled, m
   double below_table_tolerance_m = 0.010;    // poses whose box reaches deeper under z = 0 are culled, m (a raw
                                              // fit is weakest along the camera ray, and the editor lifts what is
