@@ -5,6 +5,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <limits>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -108,6 +109,10 @@ Status RecognizerOptions::Validate() const {
   }
   TEACHSIM_RETURN_IF_ERROR(positive("work_area_radius_m", work_area_radius_m));
   TEACHSIM_RETURN_IF_ERROR(positive("support_tolerance_m", support_tolerance_m));
+  if (!(support_centre_slack_m >= 0)) {
+    return Status::InvalidInput("RecognizerOptions::support_centre_slack_m = " +
+                                json::FormatNumber(support_centre_slack_m) + " must be >= 0");
+  }
   if (!(below_table_tolerance_m >= 0)) return Status::InvalidInput("RecognizerOptions::below_table_tolerance_m must be >= 0");
   if (!(table_snap_distance_m >= 0)) return Status::InvalidInput("RecognizerOptions::table_snap_distance_m must be >= 0");
   if (!(table_snap_max_tilt_deg >= 0 && table_snap_max_tilt_deg < 45)) {
@@ -1013,6 +1018,36 @@ double EvidenceScore(const PoseEvidence& e) {
   return 1 / (1 + std::exp(-z));
 }
 
+WorldExtent ExtentOf(const std::vector<Eigen::Vector3d>& points) {
+  TEACHSIM_CHECK(!points.empty());
+  WorldExtent e{points[0], points[0]};
+  for (const Eigen::Vector3d& p : points) e.min = e.min.cwiseMin(p), e.max = e.max.cwiseMax(p);
+  return e;
+}
+
+bool RestsOn(const WorldExtent& object, const WorldExtent& below, double z_tolerance_m) {
+  const bool overlap_xy = object.min.x() < below.max.x() && object.max.x() > below.min.x() &&
+                          object.min.y() < below.max.y() && object.max.y() > below.min.y();
+  return overlap_xy && std::abs(object.min.z() - below.max.z()) <= z_tolerance_m;
+}
+
+bool StandsOnSupports(const WorldExtent& object, const std::vector<WorldExtent>& supports, double z_tolerance_m,
+                      double centre_slack_m) {
+  Eigen::Vector2d contact_min = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector2d contact_max = -contact_min;
+  bool rests = false;
+  for (const WorldExtent& below : supports) {
+    if (!RestsOn(object, below, z_tolerance_m)) continue;
+    rests = true;
+    contact_min = contact_min.cwiseMin(object.min.head<2>().cwiseMax(below.min.head<2>()));
+    contact_max = contact_max.cwiseMax(object.max.head<2>().cwiseMin(below.max.head<2>()));
+  }
+  if (!rests) return false;
+  const Eigen::Vector2d centre = 0.5 * (object.min + object.max).head<2>();
+  return (centre.array() >= contact_min.array() - centre_slack_m).all() &&
+         (centre.array() <= contact_max.array() + centre_slack_m).all();
+}
+
 double VisibleOutlineInImage(const Model& model, const Camera& camera,
                              const geometry::Pose3& camera_T_object) {
   const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
@@ -1534,39 +1569,33 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   }
   const auto t4 = Clock::now();
 
-  // Culling what floats (§7.1: poses that cannot be real): each recognition rests on the table, on
-  // a fixed object's top or on another recognition's top (checked until nothing changes). Applied
-  // to all candidates before the non-maximum suppression too, so that a floating wrong candidate
-  // cannot suppress the right one and then be culled itself.
-  struct Extent {
-    Eigen::Vector3d min, max;
-  };
-  auto extent = [](const std::vector<Eigen::Vector3d>& v) {
-    Extent e{v[0], v[0]};
-    for (const auto& p : v) e.min = e.min.cwiseMin(p), e.max = e.max.cwiseMax(p);
-    return e;
-  };
-  auto rests_on = [&](const Extent& a, const Extent& below) {
-    const bool overlap_xy = a.min.x() < below.max.x() && a.max.x() > below.min.x() && a.min.y() < below.max.y() &&
-                            a.max.y() > below.min.y();
-    return overlap_xy && std::abs(a.min.z() - below.max.z()) <= options_.support_tolerance_m;
-  };
-  std::vector<Extent> fixed_extents;
-  for (const FixedPart& part : fixed_parts) fixed_extents.push_back(extent(part.vertices));
+  // Culling what floats (§7.1: poses that cannot be real): each recognition rests on the table, or
+  // stands on fixed objects' tops or other recognitions' tops (StandsOnSupports: its centre over where
+  // it touches them; checked until nothing changes). Applied to all candidates before the non-maximum
+  // suppression too, so that a floating wrong candidate cannot suppress the right one and then be
+  // culled itself.
+  std::vector<WorldExtent> fixed_extents;
+  for (const FixedPart& part : fixed_parts) fixed_extents.push_back(ExtentOf(part.vertices));
   auto supported_subset = [&](const std::vector<size_t>& set) {
-    std::vector<Extent> extents;
+    std::vector<WorldExtent> extents;
     for (size_t i : set) {
       const Candidate& c = candidates[i];
-      extents.push_back(extent(BoxWorldVertices(models_.models[static_cast<size_t>(c.model)], world_T_camera * c.camera_T_object)));
+      extents.push_back(ExtentOf(BoxWorldVertices(models_.models[static_cast<size_t>(c.model)], world_T_camera * c.camera_T_object)));
     }
     std::vector<bool> supported(set.size(), false);
+    std::vector<WorldExtent> supports;
     for (bool changed = true; changed;) {
       changed = false;
       for (size_t k = 0; k < set.size(); ++k) {
         if (supported[k]) continue;
         bool ok = std::abs(extents[k].min.z() - table_top_z) <= options_.support_tolerance_m;
-        for (const Extent& f : fixed_extents) ok = ok || rests_on(extents[k], f);
-        for (size_t j = 0; j < set.size(); ++j) ok = ok || (supported[j] && j != k && rests_on(extents[k], extents[j]));
+        if (!ok) {
+          supports = fixed_extents;
+          for (size_t j = 0; j < set.size(); ++j) {
+            if (supported[j] && j != k) supports.push_back(extents[j]);
+          }
+          ok = StandsOnSupports(extents[k], supports, options_.support_tolerance_m, options_.support_centre_slack_m);
+        }
         if (ok) supported[k] = changed = true;
       }
     }

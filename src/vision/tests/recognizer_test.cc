@@ -305,6 +305,10 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o.conflict_tie_rank_share = 2;
   EXPECT_NE(o.Validate().message().find("conflict_tie_rank_share = 2 must be in [0, 1]"), std::string::npos);
   o.conflict_tie_rank_share = 0.85;
+  o.support_centre_slack_m = -0.001;
+  EXPECT_NE(o.Validate().message().find("support_centre_slack_m = -0.001 must be >= 0"), std::string::npos);
+  o.support_centre_slack_m = 0;
+  EXPECT_TRUE(o.Validate().ok());
   o.index_search_eps = -0.5;
   EXPECT_NE(o.Validate().message().find("index_search_eps = -0.5 must be >= 0"), std::string::npos);
   o.index_search_eps = 0;  // exact: valid
@@ -653,6 +657,39 @@ TEST(RecognizerTest, AlternativesAreFittedUnlessSwitchedOff) {
     EXPECT_EQ(result->objects[0].model, "bar90");
     EXPECT_LT((result->objects[0].raw_world_T_object.translation - bar_pose.translation).norm(), 0.003);
   }
+}
+
+// The culling of what cannot stand: a block off the table stands on a wall when its centre is over
+// the wall's top, or over the region between two walls it bridges; its centre beyond the wall's edge
+// (a pose off along the camera ray, laid on the edge of the frame), it topples; a block above the
+// wall's top by more than the tolerance does not rest on it at all.
+TEST(SelectionTest, AnOffTableRecognitionStandsOnlyWithItsCentreOverItsSupports) {
+  auto box = [](double x0, double y0, double z0, double x1, double y1, double z1) {
+    return WorldExtent{Eigen::Vector3d(x0, y0, z0), Eigen::Vector3d(x1, y1, z1)};
+  };
+  const WorldExtent wall_a = box(0.00, -0.10, 0, 0.02, 0.10, 0.03);   // 20 mm wide, 30 mm high
+  const WorldExtent wall_b = box(0.08, -0.10, 0, 0.10, 0.10, 0.03);
+  constexpr double kTol = 0.012, kSlack = 0.002;
+  // A cube 45 mm centred on wall a's top.
+  EXPECT_TRUE(StandsOnSupports(box(-0.0125, 0, 0.03, 0.0325, 0.045, 0.075), {wall_a}, kTol, kSlack));
+  // Its centre 1.5 mm beyond the wall's edge: within the slack.
+  EXPECT_TRUE(StandsOnSupports(box(-0.024, 0, 0.03, 0.021, 0.045, 0.075), {wall_a}, kTol, kSlack));
+  // Its centre 10 mm beyond the edge: it topples.
+  EXPECT_FALSE(StandsOnSupports(box(-0.0325, 0, 0.03, 0.0125, 0.045, 0.075), {wall_a}, kTol, kSlack));
+  EXPECT_TRUE(StandsOnSupports(box(-0.0325, 0, 0.03, 0.0125, 0.045, 0.075), {wall_a}, kTol, 0.011));
+  // A bar 90 mm bridging both walls, its centre over the gap between them.
+  EXPECT_TRUE(StandsOnSupports(box(0.005, 0, 0.03, 0.095, 0.045, 0.075), {wall_a, wall_b}, kTol, kSlack));
+  // The same bar on wall b alone (wall a not a support): its centre over the gap, it topples.
+  EXPECT_FALSE(StandsOnSupports(box(0.005, 0, 0.03, 0.095, 0.045, 0.075), {wall_b}, kTol, kSlack));
+  // 20 mm above the tops: resting on nothing.
+  EXPECT_FALSE(StandsOnSupports(box(0.005, 0, 0.05, 0.095, 0.045, 0.095), {wall_a, wall_b}, kTol, kSlack));
+  EXPECT_FALSE(StandsOnSupports(box(-0.0125, 0, 0.03, 0.0325, 0.045, 0.075), {}, kTol, kSlack));
+  // ExtentOf and RestsOn.
+  const WorldExtent e = ExtentOf({Eigen::Vector3d(1, 2, 3), Eigen::Vector3d(-1, 5, 0), Eigen::Vector3d(0, 0, 4)});
+  EXPECT_EQ(e.min, Eigen::Vector3d(-1, 0, 0));
+  EXPECT_EQ(e.max, Eigen::Vector3d(1, 5, 4));
+  EXPECT_TRUE(RestsOn(box(0.01, 0, 0.035, 0.05, 0.04, 0.08), wall_a, kTol));
+  EXPECT_FALSE(RestsOn(box(0.03, 0, 0.03, 0.05, 0.04, 0.08), wall_a, kTol));  // beside it
 }
 
 // The selection's pairwise test: a rendered bar against a cube fitted onto its one end, and a

@@ -24,7 +24,8 @@
 // fitted at the candidates' places), refitrms-PX, refitcoverage-X, refitscore-X, refitinimage-X (the
 // edge-point refit's limits; no-refit switches it off), balance-N (the non-maximum suppression's pairwise
 // margin; 0: off), ownlead-N and rankshare-X (its second way to replace a rival; ownlead-0: off),
-// inimagelead-X and tieshare-X (its third way, where neither own outline shows; inimagelead-0: off). For
+// inimagelead-X and tieshare-X (its third way, where neither own outline shows; inimagelead-0: off),
+// centreslack-MM (how far beyond its supports' tops an off-table recognition's centre may lie). For
 // teachsim, every scored object is put down to the stage that lost it (vision::ClassifyLoss), per
 // visible-fraction bin.
 #include <time.h>
@@ -524,6 +525,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"rankshare", [o](double v) { o->conflict_rank_share = v; }},
       {"inimagelead", [o](double v) { o->conflict_in_image_lead = v; }},
       {"tieshare", [o](double v) { o->conflict_tie_rank_share = v; }},
+      {"centreslack", [o](double v) { o->support_centre_slack_m = v / 1000; }},
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
@@ -533,7 +535,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
            "stepgrey-X, stepoffset-PX, alternatives-N, refitrms-PX, refitcoverage-X, refitscore-X, "
            "refitinimage-X, "
-           "balance-N, ownlead-N, rankshare-X, inimagelead-X, tieshare-X)";
+           "balance-N, ownlead-N, rankshare-X, inimagelead-X, tieshare-X, centreslack-MM)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);

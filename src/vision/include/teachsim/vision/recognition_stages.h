@@ -192,6 +192,22 @@ struct PolishResult {
 PolishResult PolishPose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                         const EdgeMap& edge_map, bool on_plane, double search_px = 3);
 
+// An axis-aligned box in the world (a recognition's or a fixed part's extent), m.
+struct WorldExtent {
+  Eigen::Vector3d min = Eigen::Vector3d::Zero(), max = Eigen::Vector3d::Zero();
+};
+// The extent of a set of points (at least one).
+WorldExtent ExtentOf(const std::vector<Eigen::Vector3d>& points);
+// Whether `object` rests on `below`: their footprints overlap and its lowest point is within
+// `z_tolerance_m` of the other's top.
+bool RestsOn(const WorldExtent& object, const WorldExtent& below, double z_tolerance_m);
+// Whether `object`, off the table, stands on the supports it rests on (RestsOn) among `supports`:
+// it rests on at least one, and its centre (x, y) lies within `centre_slack_m` of the region where
+// its footprint overlaps theirs (the overlaps bounded together: a block bridging two walls stands,
+// one whose centre is beyond a wall's edge topples).
+bool StandsOnSupports(const WorldExtent& object, const std::vector<WorldExtent>& supports, double z_tolerance_m,
+                      double centre_slack_m);
+
 // The share of a pose's visible predicted edges (by length, sampled every 2 px) that projects into
 // the image, 0..1 (0 when a corner is behind the camera): of a block cut far by the image border,
 // what is left says too little for the edge-point refit (RecognizerOptions::refit_min_in_image).
