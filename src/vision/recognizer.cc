@@ -5,7 +5,6 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
-#include <limits>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -13,6 +12,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <nanoflann.hpp>
 #include <opencv2/imgproc.hpp>
@@ -981,7 +981,8 @@ int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object
   return balance;
 }
 
-bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival, const RecognizerOptions& options) {
+bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival,
+                   const RecognizerOptions& options) {
   const int margin = options.conflict_balance_margin;
   if (margin <= 0) return false;
   if (candidate.own >= margin) {
@@ -990,7 +991,8 @@ bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival, con
            candidate.rank >= options.conflict_rank_share * rival.rank;
   }
   // Neither own outline shows: the one more inside the image, at a close rank.
-  return options.conflict_in_image_lead > 0 && std::abs(candidate.own) < margin && std::abs(rival.own) < margin &&
+  return options.conflict_in_image_lead > 0 && std::abs(candidate.own) < margin &&
+         std::abs(rival.own) < margin &&
          candidate.in_image >= rival.in_image + options.conflict_in_image_lead &&
          candidate.rank >= options.conflict_tie_rank_share * rival.rank;
 }
@@ -1031,8 +1033,8 @@ bool RestsOn(const WorldExtent& object, const WorldExtent& below, double z_toler
   return overlap_xy && std::abs(object.min.z() - below.max.z()) <= z_tolerance_m;
 }
 
-bool StandsOnSupports(const WorldExtent& object, const std::vector<WorldExtent>& supports, double z_tolerance_m,
-                      double centre_slack_m) {
+bool StandsOnSupports(const WorldExtent& object, const std::vector<WorldExtent>& supports,
+                      double z_tolerance_m, double centre_slack_m) {
   Eigen::Vector2d contact_min = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
   Eigen::Vector2d contact_max = -contact_min;
   bool rests = false;
@@ -1580,7 +1582,8 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     std::vector<WorldExtent> extents;
     for (size_t i : set) {
       const Candidate& c = candidates[i];
-      extents.push_back(ExtentOf(BoxWorldVertices(models_.models[static_cast<size_t>(c.model)], world_T_camera * c.camera_T_object)));
+      extents.push_back(ExtentOf(BoxWorldVertices(models_.models[static_cast<size_t>(c.model)],
+                                                  world_T_camera * c.camera_T_object)));
     }
     std::vector<bool> supported(set.size(), false);
     std::vector<WorldExtent> supports;
@@ -1594,7 +1597,8 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
           for (size_t j = 0; j < set.size(); ++j) {
             if (supported[j] && j != k) supports.push_back(extents[j]);
           }
-          ok = StandsOnSupports(extents[k], supports, options_.support_tolerance_m, options_.support_centre_slack_m);
+          ok = StandsOnSupports(extents[k], supports, options_.support_tolerance_m,
+                                options_.support_centre_slack_m);
         }
         if (ok) supported[k] = changed = true;
       }
@@ -1658,9 +1662,9 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
         const Candidate& o = candidates[accepted[k]];
         others.push_back({&models_.models[static_cast<size_t>(o.model)], o.camera_T_object});
       }
-      PairwiseSide own{OwnOutlineBalance(mc, c.camera_T_object, others, camera, detection.edge_map, fixed_edges,
-                                         options_),
-                       rank[i], VisibleOutlineInImage(mc, camera, c.camera_T_object)};
+      PairwiseSide own{
+          OwnOutlineBalance(mc, c.camera_T_object, others, camera, detection.edge_map, fixed_edges, options_),
+          rank[i], VisibleOutlineInImage(mc, camera, c.camera_T_object)};
       others.front() = {&mc, c.camera_T_object};
       PairwiseSide rival{
           OwnOutlineBalance(ma, a.camera_T_object, others, camera, detection.edge_map, fixed_edges, options_),

@@ -667,7 +667,7 @@ TEST(SelectionTest, AnOffTableRecognitionStandsOnlyWithItsCentreOverItsSupports)
   auto box = [](double x0, double y0, double z0, double x1, double y1, double z1) {
     return WorldExtent{Eigen::Vector3d(x0, y0, z0), Eigen::Vector3d(x1, y1, z1)};
   };
-  const WorldExtent wall_a = box(0.00, -0.10, 0, 0.02, 0.10, 0.03);   // 20 mm wide, 30 mm high
+  const WorldExtent wall_a = box(0.00, -0.10, 0, 0.02, 0.10, 0.03);  // 20 mm wide, 30 mm high
   const WorldExtent wall_b = box(0.08, -0.10, 0, 0.10, 0.10, 0.03);
   constexpr double kTol = 0.012, kSlack = 0.002;
   // A cube 45 mm centred on wall a's top.

@@ -205,8 +205,8 @@ bool RestsOn(const WorldExtent& object, const WorldExtent& below, double z_toler
 // it rests on at least one, and its centre (x, y) lies within `centre_slack_m` of the region where
 // its footprint overlaps theirs (the overlaps bounded together: a block bridging two walls stands,
 // one whose centre is beyond a wall's edge topples).
-bool StandsOnSupports(const WorldExtent& object, const std::vector<WorldExtent>& supports, double z_tolerance_m,
-                      double centre_slack_m);
+bool StandsOnSupports(const WorldExtent& object, const std::vector<WorldExtent>& supports,
+                      double z_tolerance_m, double centre_slack_m);
 
 // The share of a pose's visible predicted edges (by length, sampled every 2 px) that projects into
 // the image, 0..1 (0 when a corner is behind the camera): of a block cut far by the image border,
@@ -327,7 +327,8 @@ struct PairwiseSide {
 // while the candidate ranks at least conflict_rank_share of the rival; or, where neither own balance
 // reaches the margin (either sign), when a larger share of the candidate's outline is inside the
 // image by conflict_in_image_lead while it ranks at least conflict_tie_rank_share of the rival.
-bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival, const RecognizerOptions& options);
+bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival,
+                   const RecognizerOptions& options);
 struct PoseEvidence {
   double matched_fraction = 0;  // of the visible predicted edge length covered by matched lines
   double support_fraction = 0;  // of the informative sample points along the visible edges (an edge pixel

@@ -68,10 +68,10 @@ struct RecognizerOptions {
                                              // rendered blocks, 78 against 76 of 193, in 30 % less time)
   // --- support-plane hypotheses (a second source beside the index, paper §7.1; blocks at rest, §4.3)
   bool support_hypotheses = true;            // off: the index alone proposes poses (the ablation)
-  int max_support_hypotheses = 80;           // fitted per image, best edge support first (40 until session 17;
-                                             // 80 on render seeds 7-31: found >= 0.7 visible 4479 -> 4500 of 4738,
-                                             // 0.4-0.7 103 -> 110 of 372, false 68 -> 73 in 1500 images, +0.9 ms
-                                             // per image; held out 19-31: +10, +4, +3 false)
+  // Fitted per image, best edge support first. 40 until session 17; 80 on render seeds 7-31: found
+  // >= 0.7 visible 4479 -> 4500 of 4738, 0.4-0.7 103 -> 110 of 372, false 68 -> 73 in 1500 images,
+  // +0.9 ms per image (held out 19-31: +10, +4, +3 false; docs/benchmarks.md).
+  int max_support_hypotheses = 80;
   double support_min_score = 0.5;            // edge support of a support hypothesis before fitting, 0..1
   double support_perpendicular_tol_deg = 8;  // two horizontal arms on the plane must be this close to 90 deg
   double support_vertical_tol_deg = 4;       // an arm this close to the image vertical may be the vertical edge
