@@ -1020,32 +1020,32 @@ double EvidenceScore(const PoseEvidence& e) {
   return 1 / (1 + std::exp(-z));
 }
 
-WorldExtent ExtentOf(const std::vector<Eigen::Vector3d>& points) {
+geometry::Aabb ExtentOf(const std::vector<Eigen::Vector3d>& points) {
   TEACHSIM_CHECK(!points.empty());
-  WorldExtent e{points[0], points[0]};
-  for (const Eigen::Vector3d& p : points) e.min = e.min.cwiseMin(p), e.max = e.max.cwiseMax(p);
+  geometry::Aabb e;
+  for (const Eigen::Vector3d& p : points) e.Extend(p);
   return e;
 }
 
-bool RestsOn(const WorldExtent& object, const WorldExtent& below, double z_tolerance_m) {
+bool RestsOn(const geometry::Aabb& object, const geometry::Aabb& below, double z_tolerance_m) {
   const bool overlap_xy = object.min.x() < below.max.x() && object.max.x() > below.min.x() &&
                           object.min.y() < below.max.y() && object.max.y() > below.min.y();
   return overlap_xy && std::abs(object.min.z() - below.max.z()) <= z_tolerance_m;
 }
 
-bool StandsOnSupports(const WorldExtent& object, const std::vector<WorldExtent>& supports,
+bool StandsOnSupports(const geometry::Aabb& object, const std::vector<geometry::Aabb>& supports,
                       double z_tolerance_m, double centre_slack_m) {
   Eigen::Vector2d contact_min = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
   Eigen::Vector2d contact_max = -contact_min;
   bool rests = false;
-  for (const WorldExtent& below : supports) {
+  for (const geometry::Aabb& below : supports) {
     if (!RestsOn(object, below, z_tolerance_m)) continue;
     rests = true;
     contact_min = contact_min.cwiseMin(object.min.head<2>().cwiseMax(below.min.head<2>()));
     contact_max = contact_max.cwiseMax(object.max.head<2>().cwiseMin(below.max.head<2>()));
   }
   if (!rests) return false;
-  const Eigen::Vector2d centre = 0.5 * (object.min + object.max).head<2>();
+  const Eigen::Vector2d centre = object.Center().head<2>();
   return (centre.array() >= contact_min.array() - centre_slack_m).all() &&
          (centre.array() <= contact_max.array() + centre_slack_m).all();
 }
@@ -1576,17 +1576,17 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   // it touches them; checked until nothing changes). Applied to all candidates before the non-maximum
   // suppression too, so that a floating wrong candidate cannot suppress the right one and then be
   // culled itself.
-  std::vector<WorldExtent> fixed_extents;
+  std::vector<geometry::Aabb> fixed_extents;
   for (const FixedPart& part : fixed_parts) fixed_extents.push_back(ExtentOf(part.vertices));
   auto supported_subset = [&](const std::vector<size_t>& set) {
-    std::vector<WorldExtent> extents;
+    std::vector<geometry::Aabb> extents;
     for (size_t i : set) {
       const Candidate& c = candidates[i];
       extents.push_back(ExtentOf(BoxWorldVertices(models_.models[static_cast<size_t>(c.model)],
                                                   world_T_camera * c.camera_T_object)));
     }
     std::vector<bool> supported(set.size(), false);
-    std::vector<WorldExtent> supports;
+    std::vector<geometry::Aabb> supports;
     for (bool changed = true; changed;) {
       changed = false;
       for (size_t k = 0; k < set.size(); ++k) {

@@ -665,10 +665,10 @@ TEST(RecognizerTest, AlternativesAreFittedUnlessSwitchedOff) {
 // wall's top by more than the tolerance does not rest on it at all.
 TEST(SelectionTest, AnOffTableRecognitionStandsOnlyWithItsCentreOverItsSupports) {
   auto box = [](double x0, double y0, double z0, double x1, double y1, double z1) {
-    return WorldExtent{Eigen::Vector3d(x0, y0, z0), Eigen::Vector3d(x1, y1, z1)};
+    return geometry::Aabb{Eigen::Vector3d(x0, y0, z0), Eigen::Vector3d(x1, y1, z1)};
   };
-  const WorldExtent wall_a = box(0.00, -0.10, 0, 0.02, 0.10, 0.03);  // 20 mm wide, 30 mm high
-  const WorldExtent wall_b = box(0.08, -0.10, 0, 0.10, 0.10, 0.03);
+  const geometry::Aabb wall_a = box(0.00, -0.10, 0, 0.02, 0.10, 0.03);  // 20 mm wide, 30 mm high
+  const geometry::Aabb wall_b = box(0.08, -0.10, 0, 0.10, 0.10, 0.03);
   constexpr double kTol = 0.012, kSlack = 0.002;
   // A cube 45 mm centred on wall a's top.
   EXPECT_TRUE(StandsOnSupports(box(-0.0125, 0, 0.03, 0.0325, 0.045, 0.075), {wall_a}, kTol, kSlack));
@@ -685,7 +685,8 @@ TEST(SelectionTest, AnOffTableRecognitionStandsOnlyWithItsCentreOverItsSupports)
   EXPECT_FALSE(StandsOnSupports(box(0.005, 0, 0.05, 0.095, 0.045, 0.095), {wall_a, wall_b}, kTol, kSlack));
   EXPECT_FALSE(StandsOnSupports(box(-0.0125, 0, 0.03, 0.0325, 0.045, 0.075), {}, kTol, kSlack));
   // ExtentOf and RestsOn.
-  const WorldExtent e = ExtentOf({Eigen::Vector3d(1, 2, 3), Eigen::Vector3d(-1, 5, 0), Eigen::Vector3d(0, 0, 4)});
+  const geometry::Aabb e =
+      ExtentOf({Eigen::Vector3d(1, 2, 3), Eigen::Vector3d(-1, 5, 0), Eigen::Vector3d(0, 0, 4)});
   EXPECT_EQ(e.min, Eigen::Vector3d(-1, 0, 0));
   EXPECT_EQ(e.max, Eigen::Vector3d(1, 5, 4));
   EXPECT_TRUE(RestsOn(box(0.01, 0, 0.035, 0.05, 0.04, 0.08), wall_a, kTol));

@@ -11,6 +11,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "teachsim/geometry/aabb.h"
 #include "teachsim/geometry/pose.h"
 #include "teachsim/vision/camera.h"
 #include "teachsim/vision/recognizer.h"
@@ -192,20 +193,16 @@ struct PolishResult {
 PolishResult PolishPose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                         const EdgeMap& edge_map, bool on_plane, double search_px = 3);
 
-// An axis-aligned box in the world (a recognition's or a fixed part's extent), m.
-struct WorldExtent {
-  Eigen::Vector3d min = Eigen::Vector3d::Zero(), max = Eigen::Vector3d::Zero();
-};
-// The extent of a set of points (at least one).
-WorldExtent ExtentOf(const std::vector<Eigen::Vector3d>& points);
+// The world extent of a set of points (a recognition's box, a fixed part; at least one point), m.
+geometry::Aabb ExtentOf(const std::vector<Eigen::Vector3d>& points);
 // Whether `object` rests on `below`: their footprints overlap and its lowest point is within
 // `z_tolerance_m` of the other's top.
-bool RestsOn(const WorldExtent& object, const WorldExtent& below, double z_tolerance_m);
+bool RestsOn(const geometry::Aabb& object, const geometry::Aabb& below, double z_tolerance_m);
 // Whether `object`, off the table, stands on the supports it rests on (RestsOn) among `supports`:
 // it rests on at least one, and its centre (x, y) lies within `centre_slack_m` of the region where
 // its footprint overlaps theirs (the overlaps bounded together: a block bridging two walls stands,
 // one whose centre is beyond a wall's edge topples).
-bool StandsOnSupports(const WorldExtent& object, const std::vector<WorldExtent>& supports,
+bool StandsOnSupports(const geometry::Aabb& object, const std::vector<geometry::Aabb>& supports,
                       double z_tolerance_m, double centre_slack_m);
 
 // The share of a pose's visible predicted edges (by length, sampled every 2 px) that projects into
