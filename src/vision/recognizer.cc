@@ -80,6 +80,7 @@ Status RecognizerOptions::Validate() const {
     return Status::InvalidInput("RecognizerOptions::max_alternative_fits = " +
                                 std::to_string(max_alternative_fits) + " must be >= 0 (0: none)");
   }
+  TEACHSIM_RETURN_IF_ERROR(positive("alternatives_per_model", alternatives_per_model));
   TEACHSIM_RETURN_IF_ERROR(positive("support_perpendicular_tol_deg", support_perpendicular_tol_deg));
   TEACHSIM_RETURN_IF_ERROR(positive("support_vertical_tol_deg", support_vertical_tol_deg));
   TEACHSIM_RETURN_IF_ERROR(positive("max_iterations", max_iterations));
@@ -1311,7 +1312,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   // 4-5. pose fitting and verification: the support-plane hypotheses (ranked by edge support),
   // then the index's most probable hypotheses.
   std::vector<Candidate> candidates;
-  std::vector<bool> claimed(lines.size(), false);
+  SegmentClaims claims(lines.size());
   std::vector<std::pair<int, geometry::Pose3>> tried;  // initial poses already fitted
   const double match_angle = options_.match_angle_deg * M_PI / 180;
   using Outcome = RecognitionTrace::Outcome;
@@ -1442,7 +1443,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     c.evidence = evidence;
     c.rms_px = fit.rms_px;
     c.rank_score = rank_score >= 0 ? rank_score : EvidenceScore(evidence);
-    for (int seg : set.segments) claimed[static_cast<size_t>(seg)] = true;
+    for (int seg : set.segments) claims.Claim(seg, model_index);
     candidates.push_back(std::move(c));
   };
 
@@ -1487,7 +1488,10 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     const geometry::Pose3& camera_T_world = camera.camera_T_world();
     for (const SupportHypothesis& h : support_hypotheses) {
       const ImageCorner& corner = corners[static_cast<size_t>(h.corner)];
-      if (claimed[static_cast<size_t>(corner.segments[0])] && claimed[static_cast<size_t>(corner.segments[1])]) continue;
+      if (claims.BothClaimed(corner.segments[0], corner.segments[1],
+                             options_.skip_corners_claimed_by_any_model ? SegmentClaims::kAnyModel : h.model)) {
+        continue;
+      }
       const geometry::Pose3 initial = camera_T_world * h.world_T_object;
       if (already_tried(h.model, initial)) continue;
       const Model& model = models_.models[static_cast<size_t>(h.model)];
@@ -1510,7 +1514,9 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     const Model& model = models_.models[entry.model];
     const int nseg = GroupSegments(group.kind);
     bool all_claimed = true;
-    for (int s = 0; s < nseg; ++s) all_claimed = all_claimed && claimed[static_cast<size_t>(group.segments[static_cast<size_t>(s)])];
+    for (int s = 0; s < nseg; ++s) {
+      all_claimed = all_claimed && claims.Claimed(group.segments[static_cast<size_t>(s)], SegmentClaims::kAnyModel);
+    }
     if (all_claimed) continue;
     const geometry::Pose3 initial = InitialPose(index, model, entry, group, K);
     if (!(initial.translation.z() > 0.05) || !initial.translation.allFinite()) continue;

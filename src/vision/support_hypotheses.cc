@@ -383,8 +383,7 @@ std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models,
   const geometry::Pose3& camera_T_world = camera.camera_T_world();
   for (size_t m = 0; m < models.models.size(); ++m) {
     const Eigen::Vector3d& s = models.models[m].box_size_m;
-    SupportHypothesis best;
-    best.score = -1;
+    std::vector<SupportHypothesis> placements;  // of this model, in the order tried
     for (int corner = 0; corner < 4; ++corner) {
       const double sign[2] = {corner & 1 ? 1.0 : -1.0, corner & 2 ? 1.0 : -1.0};
       const Eigen::Vector3d anchor = bottom_centre + sign[0] * half[0] * h[0] + sign[1] * half[1] * h[1];
@@ -410,14 +409,28 @@ std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models,
           const geometry::Pose3 camera_T_object = camera_T_world * pose;
           if (!(camera_T_object.translation.z() > 0.05)) continue;
           const double score = PlacementSupport(s, camera, camera_T_object, detection.edge_map, options);
-          if (score < 0 || score <= best.score) continue;
-          best.model = static_cast<int>(m);
-          best.world_T_object = pose;
-          best.score = score;
+          if (score < 0) continue;
+          SupportHypothesis placement;
+          placement.model = static_cast<int>(m);
+          placement.world_T_object = pose;
+          placement.score = score;
+          placements.push_back(placement);
         }
       }
     }
-    if (best.score >= 0) out.push_back(best);
+    // The best few distinct placements of this model (equal scores: the first tried).
+    std::stable_sort(placements.begin(), placements.end(),
+                     [](const SupportHypothesis& a, const SupportHypothesis& b) { return a.score > b.score; });
+    const double near_m = 0.25 * s.minCoeff();
+    const size_t first = out.size();
+    for (const SupportHypothesis& placement : placements) {
+      if (static_cast<int>(out.size() - first) >= options.alternatives_per_model) break;
+      bool repeat = false;
+      for (size_t k = first; k < out.size(); ++k) {
+        repeat = repeat || SamePlace(models.models[m], placement, out[k], near_m);
+      }
+      if (!repeat) out.push_back(placement);
+    }
   }
   std::stable_sort(out.begin(), out.end(),
                    [](const SupportHypothesis& a, const SupportHypothesis& b) { return a.score > b.score; });

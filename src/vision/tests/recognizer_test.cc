@@ -270,6 +270,9 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o.max_alternative_fits = 0;  // none: valid
   EXPECT_TRUE(o.Validate().ok());
   o = RecognizerOptions();
+  o.alternatives_per_model = 0;
+  EXPECT_NE(o.Validate().message().find("alternatives_per_model"), std::string::npos);
+  o = RecognizerOptions();
   o.accept_evidence_score = 0.1;  // below min_evidence_score
   EXPECT_NE(o.Validate().message().find("accept_evidence_score = 0.1 must be >= min_evidence_score"),
             std::string::npos)
@@ -617,11 +620,68 @@ TEST(AlternativeHypothesesTest, ACubeOnOneEndOfABarHasTheBarAmongItsAlternatives
       EXPECT_GE(h.score, options.support_min_score);
       EXPECT_FALSE(h.model == 0 && (h.world_T_object.translation - cube.translation).norm() < 1e-3);
     }
+    // Places per model: at most options.alternatives_per_model of each, distinct ones (SamePlace's
+    // thinning), best first overall.
+    for (const int per_model : {1, 2, 3}) {
+      RecognizerOptions o = options;
+      o.alternatives_per_model = per_model;
+      const std::vector<SupportHypothesis> places = AlternativeHypotheses(library, camera, detection, 0, cube, o);
+      ASSERT_FALSE(places.empty());
+      EXPECT_EQ(places.front().model, 1);
+      EXPECT_LT((places.front().world_T_object.translation - bar.translation).norm(), 1e-6);
+      for (size_t i = 0; i < places.size(); ++i) {
+        if (i > 0) {
+          EXPECT_GE(places[i - 1].score, places[i].score);
+        }
+        int same_model = 0;
+        for (size_t j = 0; j < places.size(); ++j) {
+          if (places[j].model != places[i].model) continue;
+          ++same_model;
+          if (j == i) continue;
+          const Model& m = library.models[static_cast<size_t>(places[i].model)];
+          EXPECT_FALSE((places[i].world_T_object.translation - places[j].world_T_object.translation).norm() <
+                           0.25 * m.box_size_m.minCoeff() &&
+                       SymmetricRotationAngle(m, places[i].world_T_object, places[j].world_T_object) < 10 * M_PI / 180)
+              << "yaw " << yaw << ", " << per_model << " per model: places " << i << " and " << j;
+        }
+        EXPECT_LE(same_model, per_model);
+      }
+      // The best place of each model is the same whatever the number per model.
+      const std::vector<SupportHypothesis> one = AlternativeHypotheses(library, camera, detection, 0, cube, options);
+      for (const SupportHypothesis& best_of_model : one) {
+        bool kept = false;
+        for (const SupportHypothesis& h : places) {
+          kept = kept || (h.model == best_of_model.model && h.score == best_of_model.score &&
+                          (h.world_T_object.translation - best_of_model.world_T_object.translation).norm() == 0);
+        }
+        EXPECT_TRUE(kept) << "yaw " << yaw << ", " << per_model << " per model";
+      }
+    }
     // Tilted by 20 degrees about a horizontal axis: not at rest, no alternatives.
     geometry::Pose3 tilted = cube;
     tilted.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(0.35, Eigen::Vector3d::UnitX())) * cube.rotation;
     EXPECT_TRUE(AlternativeHypotheses(library, camera, detection, 0, tilted, options).empty());
   }
+}
+
+// The claims on segments: by model, or by any model; a corner is claimed by a model only when
+// both of its segments are.
+TEST(SegmentClaimsTest, ClaimsAreKeptPerModel) {
+  SegmentClaims claims(4);
+  EXPECT_FALSE(claims.Claimed(0, SegmentClaims::kAnyModel));
+  claims.Claim(0, 2);
+  claims.Claim(1, 2);
+  claims.Claim(1, 3);
+  claims.Claim(1, 3);  // twice: the same
+  EXPECT_TRUE(claims.Claimed(0, SegmentClaims::kAnyModel));
+  EXPECT_TRUE(claims.Claimed(0, 2));
+  EXPECT_FALSE(claims.Claimed(0, 3));
+  EXPECT_TRUE(claims.Claimed(1, 3));
+  EXPECT_TRUE(claims.BothClaimed(0, 1, 2));
+  EXPECT_FALSE(claims.BothClaimed(0, 1, 3));  // model 3 matched only segment 1
+  EXPECT_TRUE(claims.BothClaimed(0, 1, SegmentClaims::kAnyModel));
+  EXPECT_FALSE(claims.BothClaimed(1, 2, SegmentClaims::kAnyModel));
+  EXPECT_FALSE(claims.Claimed(3, 0));
 }
 
 // In the recognizer: every candidate's alternatives are fitted and verified like any hypothesis
@@ -633,6 +693,9 @@ TEST(RecognizerTest, AlternativesAreFittedUnlessSwitchedOff) {
   for (const int alternatives : {2, 0}) {
     RecognizerOptions options = SmallIndexOptions();
     options.max_alternative_fits = alternatives;
+    // Claims by any model skip the cube's support hypotheses at the bar's corners once the bar is a
+    // candidate, so that the cube is fitted there as an alternative only.
+    options.skip_corners_claimed_by_any_model = true;
     auto recognizer = Recognizer::Create({{Cube(), Bar()}}, options, "");
     ASSERT_TRUE(recognizer.ok());
     RecognitionTrace trace;
@@ -657,6 +720,32 @@ TEST(RecognizerTest, AlternativesAreFittedUnlessSwitchedOff) {
     EXPECT_EQ(result->objects[0].model, "bar90");
     EXPECT_LT((result->objects[0].raw_world_T_object.translation - bar_pose.translation).norm(), 0.003);
   }
+}
+
+// The support hypotheses at a corner that a candidate has claimed: skipped only for that candidate's
+// own model. A lone bar: once it is a candidate, the cube's hypotheses at its corners are still
+// fitted (they compete in the selection, which keeps the bar); with claims by any model they are not.
+TEST(RecognizerTest, ACornerClaimedByOneModelIsStillFittedWithTheOthers) {
+  const Camera camera = SyntheticCamera();
+  const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0.04, -0.03, 0.5);
+  const cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar_pose}}, 9);
+  int cube_support_fits[2] = {0, 0};
+  for (const bool any_model : {false, true}) {
+    RecognizerOptions options = SmallIndexOptions();
+    options.max_alternative_fits = 0;
+    options.skip_corners_claimed_by_any_model = any_model;
+    auto recognizer = Recognizer::Create({{Cube(), Bar()}}, options, "");
+    ASSERT_TRUE(recognizer.ok());
+    RecognitionTrace trace;
+    auto result = recognizer->Recognize(image, camera, nullptr, &trace);
+    ASSERT_TRUE(result.ok());
+    for (const RecognitionTrace::Fitted& f : trace.fitted) {
+      cube_support_fits[any_model] += f.group_kind == kSupportKind && f.model == 0;
+    }
+    ASSERT_EQ(result->objects.size(), 1u);
+    EXPECT_EQ(result->objects[0].model, "bar90");
+  }
+  EXPECT_GT(cube_support_fits[0], cube_support_fits[1]);
 }
 
 // The culling of what cannot stand: a block off the table stands on a wall when its centre is over

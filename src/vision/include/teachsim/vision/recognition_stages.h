@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <optional>
@@ -266,6 +267,28 @@ struct SupportHypothesis {
   int corner = 0;                    // into the corners
   int plane = 0;                     // into the planes
 };
+// The image segments that verified candidates matched, and the models of those candidates: a
+// hypothesis whose segments are all claimed is not fitted again (the index's groups: by any model;
+// a support hypothesis' corner: by its own model, RecognizerOptions::skip_corners_claimed_by_any_model).
+class SegmentClaims {
+ public:
+  static constexpr int kAnyModel = -1;
+  explicit SegmentClaims(size_t segments) : models_(segments) {}
+  void Claim(int segment, int model) {
+    std::vector<int>& m = models_[static_cast<size_t>(segment)];
+    if (std::find(m.begin(), m.end(), model) == m.end()) m.push_back(model);
+  }
+  // By a candidate of `model`, or of any model (kAnyModel).
+  bool Claimed(int segment, int model) const {
+    const std::vector<int>& m = models_[static_cast<size_t>(segment)];
+    return model == kAnyModel ? !m.empty() : std::find(m.begin(), m.end(), model) != m.end();
+  }
+  bool BothClaimed(int a, int b, int model) const { return Claimed(a, model) && Claimed(b, model); }
+
+ private:
+  std::vector<std::vector<int>> models_;  // per segment
+};
+
 // Every pose that a corner gives on each plane for each model and resting face, filtered by the
 // arms' perpendicularity on the plane and their lengths against the model's edges, scored by edge
 // support (detection.edge_map), and thinned to the best per model and place: at most
@@ -281,8 +304,9 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
 // the real block. For a pose at rest (an axis within options.table_snap_max_tilt_deg of the
 // vertical), every model of the library on each of its faces, anchored at each of the pose's four
 // bottom corners and reaching inwards from it along the same horizontal directions, scored by edge
-// support (coarse samples first, as SupportHypotheses): the best placement per model with score >=
-// options.support_min_score, the pose itself left out, best first. Nothing for a pose not at rest.
+// support (coarse samples first, as SupportHypotheses): the best options.alternatives_per_model
+// distinct placements per model (SupportHypotheses' thinning) with score >= options.support_min_score,
+// the pose itself left out, best first. Nothing for a pose not at rest.
 std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models, const Camera& camera,
                                                      const LineDetection& detection, int model_index,
                                                      const geometry::Pose3& world_T_object,

@@ -82,8 +82,17 @@ struct RecognizerOptions {
   // was fitted onto a block (a cube on one end of a bar, a plate on a slab) the right one competes
   // in the selection. Benchmark renders, seeds 7-19: 2287 -> 2294 of 2476 blocks found, false
   // detections 42 -> 35 in 780 images (10 instead of 2: the same); fresh seeds 20-25: 1093 -> 1096
-  // of 1181, 23 -> 20 in 360. 0: none.
-  int max_alternative_fits = 2;
+  // of 1181, 23 -> 20 in 360. 2 until session 18, when each model got two places (below). 0: none.
+  int max_alternative_fits = 5;
+  // Places per model among a candidate's alternatives (distinct: a quarter of the model's smallest
+  // side or 10 deg apart). A wrong model's pose is off, so the anchor at the wrong corner can have
+  // more edge support than the right one (a slab standing where a bar is: the bar from the far
+  // corner 0.77, from the right one 0.65). 1 until session 18.
+  int alternatives_per_model = 2;
+  // The support-plane hypotheses at a corner whose two segments a candidate has matched: skipped when
+  // that candidate is of the hypothesis' own model (false: of any model, as until session 18; a wrong
+  // model accepted first then kept the block's own model from ever being fitted there).
+  bool skip_corners_claimed_by_any_model = false;
   // --- pose (item 4)
   int max_iterations = 20;                   // Gauss-Newton iterations of Lowe's fit
   double huber_px = 1.5;                     // Huber threshold on line residuals, px
