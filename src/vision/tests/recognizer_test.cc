@@ -355,6 +355,14 @@ RecognizerOptions SmallIndexOptions() {
   return o;
 }
 
+// The synthetic camera's image recognized with a cube and a bar in the library (no fixed world).
+Result<RecognitionResult> RecognizeCubesAndBars(const cv::Mat& image, const RecognizerOptions& options,
+                                                RecognitionTrace* trace) {
+  auto recognizer = Recognizer::Create({{Cube(), Bar()}}, options, "");
+  if (!recognizer.ok()) return recognizer.status();
+  return recognizer->Recognize(image, SyntheticCamera(), nullptr, trace);
+}
+
 TEST(RecognizerTest, TheIndexCacheIsReusedAndRebuiltWhenModelsChange) {
   const std::string dir = ::testing::TempDir() + "/teachsim-index-cache-test";
   std::filesystem::remove_all(dir);
@@ -570,11 +578,9 @@ TEST(RecognizerTest, TheSupportSourceCanBeSwitchedOff) {
   for (const bool on : {true, false}) {
     RecognizerOptions options = SmallIndexOptions();
     options.support_hypotheses = on;
-    auto recognizer = Recognizer::Create({{Cube(), Bar()}}, options, "");
-    ASSERT_TRUE(recognizer.ok());
     RecognitionTrace trace;
-    auto result = recognizer->Recognize(image, camera, nullptr, &trace);
-    ASSERT_TRUE(result.ok());
+    auto result = RecognizeCubesAndBars(image, options, &trace);
+    ASSERT_TRUE(result.ok()) << result.status().message();
     ASSERT_EQ(result->objects.size(), 1u) << "support source " << on;
     EXPECT_LT((result->objects[0].raw_world_T_object.translation - bar_pose.translation).norm(), 0.003);
     int support_fits = 0, accepted_support = 0;
@@ -696,11 +702,9 @@ TEST(RecognizerTest, AlternativesAreFittedUnlessSwitchedOff) {
     // Claims by any model skip the cube's support hypotheses at the bar's corners once the bar is a
     // candidate, so that the cube is fitted there as an alternative only.
     options.skip_corners_claimed_by_any_model = true;
-    auto recognizer = Recognizer::Create({{Cube(), Bar()}}, options, "");
-    ASSERT_TRUE(recognizer.ok());
     RecognitionTrace trace;
-    auto result = recognizer->Recognize(image, camera, nullptr, &trace);
-    ASSERT_TRUE(result.ok());
+    auto result = RecognizeCubesAndBars(image, options, &trace);
+    ASSERT_TRUE(result.ok()) << result.status().message();
     int alternative_fits = 0, candidates = 0;
     for (const RecognitionTrace::Fitted& f : trace.fitted) {
       if (f.group_kind == kAlternativeKind) {
@@ -734,11 +738,9 @@ TEST(RecognizerTest, ACornerClaimedByOneModelIsStillFittedWithTheOthers) {
     RecognizerOptions options = SmallIndexOptions();
     options.max_alternative_fits = 0;
     options.skip_corners_claimed_by_any_model = any_model;
-    auto recognizer = Recognizer::Create({{Cube(), Bar()}}, options, "");
-    ASSERT_TRUE(recognizer.ok());
     RecognitionTrace trace;
-    auto result = recognizer->Recognize(image, camera, nullptr, &trace);
-    ASSERT_TRUE(result.ok());
+    auto result = RecognizeCubesAndBars(image, options, &trace);
+    ASSERT_TRUE(result.ok()) << result.status().message();
     for (const RecognitionTrace::Fitted& f : trace.fitted) {
       cube_support_fits[any_model] += f.group_kind == kSupportKind && f.model == 0;
     }
