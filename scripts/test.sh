@@ -1,25 +1,121 @@
 #!/usr/bin/env bash
-# Set-up, build and the whole test suite: the release build, then (unless TEACHSIM_SKIP_ASAN=1)
-# the address + undefined sanitizer build, then (unless TEACHSIM_SKIP_FUZZ=1) the libFuzzer
-# harnesses, built with clang and each run for TEACHSIM_FUZZ_SECONDS (fuzz/README.md).
-# This is the README's test command and what CI runs.
+# Set-up, build and the whole test suite. This is the README's test command and what CI runs.
+#
+# Stages, in order:
+#   1. set-up (scripts/setup.sh), the release build and its ctest run: always.
+#   2. the address + undefined sanitizer build and its ctest run (skip: TEACHSIM_SKIP_ASAN=1).
+#   3. the libFuzzer harnesses, built with clang, each run for TEACHSIM_FUZZ_SECONDS (default 30;
+#      skip: TEACHSIM_SKIP_FUZZ=1; fuzz/README.md).
+#
+# Time budget: CI stops a run after 90 minutes. Stages 2 and 3 run only while they fit in
+# TEACHSIM_TEST_BUDGET_MIN minutes from the start (default 80; 0: no budget). A stage that would not
+# fit is skipped, and one that reaches the budget is stopped; either is reported in the summary
+# below, and neither fails the run. A failing build or test always fails it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+budget_s=$((${TEACHSIM_TEST_BUDGET_MIN:-80} * 60))
+fuzz_reserve_s=600  # the fuzzing stage from a cold start on 2 cores: ~8 minutes
+summary=()
+stage_start=0
+
+begin() { stage_start=$SECONDS; echo "test: --- $1 (at $((SECONDS / 60)) min $((SECONDS % 60)) s)"; }
+finish() { summary+=("$1: $2 in $((SECONDS - stage_start)) s"); }
+# Seconds left before the budget, less what must stay for later stages ($1); a large number
+# without a budget.
+left() { if ((budget_s > 0)); then echo $((budget_s - SECONDS - ${1:-0})); else echo 999999; fi; }
+report() {
+  echo "test: ===== summary (${SECONDS} s in all; budget ${TEACHSIM_TEST_BUDGET_MIN:-80} min)"
+  local line
+  for line in "${summary[@]}"; do echo "test:   $line"; done
+}
+trap report EXIT
+
+begin "set-up"
 bash scripts/setup.sh
+finish "set-up" "done"
+
+begin "release build"
 bash scripts/build.sh release
+release_build_s=$((SECONDS - stage_start))
+finish "release build" "done"
+
+begin "release tests"
 (cd build && ctest --output-on-failure --timeout 600 -j "$(nproc)")
-if [[ "${TEACHSIM_SKIP_ASAN:-0}" != 1 ]]; then
-  bash scripts/build.sh asan
-  (cd build-asan && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
-     TEACHSIM_SANITIZER_BUILD=1 ctest --output-on-failure --timeout 900 -j "$(nproc)" -LE slow)
+release_tests_s=$((SECONDS - stage_start))
+finish "release tests" "passed"
+
+# Runs "$@" with at most $1 seconds; returns 124 when stopped at that limit.
+run_within() {
+  local limit=$1
+  shift
+  ((limit > 0)) || return 124
+  timeout --kill-after=30 "$limit" "$@"
+}
+
+if [[ "${TEACHSIM_SKIP_ASAN:-0}" == 1 ]]; then
+  summary+=("sanitizer build and tests: skipped (TEACHSIM_SKIP_ASAN=1)")
+else
+  reserve=0
+  [[ "${TEACHSIM_SKIP_FUZZ:-0}" == 1 ]] || reserve=$fuzz_reserve_s
+  # The sanitizer build (-O1, no benchmarks) compiles in about the release build's time, and its
+  # tests take about 1.5 times the release tests' (measured on the 2-core VM: README, Testing).
+  estimate=$((release_build_s + release_tests_s * 3 / 2))
+  limit=$(left "$reserve")
+  if ((limit < estimate)); then
+    summary+=("sanitizer build and tests: skipped, ${limit} s left in the budget and about ${estimate} s needed")
+  else
+    begin "sanitizer build"
+    status=0
+    run_within "$limit" bash scripts/build.sh asan || status=$?
+    if ((status == 124)); then
+      finish "sanitizer build" "STOPPED at the time budget (not finished; its tests did not run)"
+    elif ((status != 0)); then
+      finish "sanitizer build" "FAILED"
+      exit "$status"
+    else
+      finish "sanitizer build" "done"
+      begin "sanitizer tests"
+      status=0
+      (cd build-asan && ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
+         TEACHSIM_SANITIZER_BUILD=1 run_within "$(left "$reserve")" \
+         ctest --output-on-failure --timeout 900 -j "$(nproc)" -LE slow) || status=$?
+      if ((status == 124)); then
+        finish "sanitizer tests" "STOPPED at the time budget (the tests that finished passed)"
+      elif ((status != 0)); then
+        finish "sanitizer tests" "FAILED"
+        exit "$status"
+      else
+        finish "sanitizer tests" "passed"
+      fi
+    fi
+  fi
 fi
-if [[ "${TEACHSIM_SKIP_FUZZ:-0}" != 1 ]]; then
+
+if [[ "${TEACHSIM_SKIP_FUZZ:-0}" == 1 ]]; then
+  summary+=("fuzzing: skipped (TEACHSIM_SKIP_FUZZ=1)")
+elif (($(left) < fuzz_reserve_s)); then
+  summary+=("fuzzing: skipped, $(left) s left in the budget and about ${fuzz_reserve_s} s needed")
+else
   # Only the harnesses are built here (the module libraries are compiled again, instrumented, in
-  # fuzz/); 30 s per harness keeps the stage under ~8 minutes on 2 cores from a cold ccache.
+  # fuzz/); 30 s per harness keeps the stage under ~8 minutes on 2 cores from a cold start.
+  begin "fuzzing"
   cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=Release -DTEACHSIM_FUZZ=ON \
     -DCMAKE_CXX_COMPILER=clang++ -DTEACHSIM_BUILD_BENCHMARKS=OFF \
     -DTEACHSIM_FUZZ_SECONDS="${TEACHSIM_FUZZ_SECONDS:-30}" > build-fuzz.configure.log 2>&1 \
     || { cat build-fuzz.configure.log; exit 1; }
-  cmake --build build-fuzz --target teachsim_fuzzers -j "${TEACHSIM_JOBS:-$(nproc)}"
-  (cd build-fuzz && ctest -L fuzz --output-on-failure -j "$(nproc)")
+  status=0
+  run_within "$(left)" cmake --build build-fuzz --target teachsim_fuzzers -j "${TEACHSIM_JOBS:-$(nproc)}" \
+    || status=$?
+  if ((status == 0)); then
+    (cd build-fuzz && run_within "$(left)" ctest -L fuzz --output-on-failure -j "$(nproc)") || status=$?
+  fi
+  if ((status == 124)); then
+    finish "fuzzing" "STOPPED at the time budget (the harnesses that finished passed)"
+  elif ((status != 0)); then
+    finish "fuzzing" "FAILED"
+    exit "$status"
+  else
+    finish "fuzzing" "passed"
+  fi
 fi
