@@ -88,6 +88,7 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(positive("match_distance_px", match_distance_px));
   TEACHSIM_RETURN_IF_ERROR(positive("match_angle_deg", match_angle_deg));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_matched_edge_fraction", min_matched_edge_fraction));
+  TEACHSIM_RETURN_IF_ERROR(fraction("matched_share_min_in_image", matched_share_min_in_image));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_score", min_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_coverage", min_coverage));
   if (!(min_edge_contrast >= 0)) return Status::InvalidInput("RecognizerOptions::min_edge_contrast must be >= 0");
@@ -1073,6 +1074,23 @@ double VisibleOutlineInImage(const Model& model, const Camera& camera,
   return total > 0 ? static_cast<double>(inside) / total : 0;
 }
 
+void MatchedWithinImage(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                        EdgeMatchSet& matched, double min_inside) {
+  if (matched.visible_length_px <= 0) return;
+  bool all_inside = true;  // every corner 2 px or more inside: the whole outline is in the image
+  for (int i = 0; i < 8 && all_inside; ++i) {
+    const auto px = camera.ProjectFromCamera(camera_T_object * BoxVertex(model.box_size_m, i));
+    all_inside =
+        px && px->x() >= 2 && px->y() >= 2 && px->x() <= camera.width() - 2 && px->y() <= camera.height() - 2;
+  }
+  if (all_inside) return;
+  const double inside = VisibleOutlineInImage(model, camera, camera_T_object);
+  if (inside <= 0 || inside >= 1 || inside < min_inside) return;
+  const double covered = matched.matched_fraction * matched.visible_length_px;
+  matched.visible_length_px *= inside;
+  matched.matched_fraction = std::min(1.0, covered / matched.visible_length_px);
+}
+
 std::optional<PolishResult> RefitOnEdgePoints(const Model& model, const Camera& camera,
                                               const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
                                               double table_top_z, const RecognizerOptions& options) {
@@ -1338,9 +1356,18 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     auto reject = [&](Outcome outcome) {
       if (traced != nullptr) traced->outcome = outcome;
     };
+    // The matched share's rule on what the image can show (RecognizerOptions::matched_share_in_image);
+    // the evidence keeps the share of the whole visible edges, the feature its score was fitted on.
+    auto enough_matched = [&](const EdgeMatchSet& matched, const geometry::Pose3& camera_T_object) {
+      EdgeMatchSet in_image = matched;
+      if (options_.matched_share_in_image) {
+        MatchedWithinImage(model, camera, camera_T_object, in_image, options_.matched_share_min_in_image);
+      }
+      return in_image.matched_fraction >= options_.min_matched_edge_fraction;
+    };
     EdgeMatchSet set =
         MatchEdges(model, K, fit.camera_T_object, lines, options_.match_distance_px, match_angle);
-    if (set.matched_fraction < options_.min_matched_edge_fraction) {
+    if (!enough_matched(set, fit.camera_T_object)) {
       reject(Outcome::kMatchedFraction);
       return;
     }
@@ -1419,7 +1446,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
         const double lines_score = EvidenceScore(refit_evidence);
         refit_evidence.rms_px = refit_evidence.rms_closest_px = polished->rms_px;
         double rms_px = 0;
-        if (refit_set.matched_fraction >= options_.min_matched_edge_fraction &&
+        if (enough_matched(refit_set, polished->fit.camera_T_object) &&
             judge(refit_evidence, &rms_px) == Outcome::kCandidate &&
             EvidenceScore(refit_evidence) >= options_.refit_accept_score) {
           fit = polished->fit;

@@ -4,6 +4,7 @@
 // that make matching and edge support fast give the answers of testing everything.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <opencv2/imgproc.hpp>
 #include <random>
 
@@ -293,6 +294,77 @@ TEST(HypothesisFitTest, MatchEdgesFindsWhatTestingEveryLineAgainstEveryEdgeFinds
     EXPECT_GT(segments.size(), 50u);               // lines beside the edges match ...
     EXPECT_LT(segments.size(), lines.size() / 2);  // ... and most do not
   }
+}
+
+// The part of each line inside the image (Liang-Barsky clipping; the synthetic camera has no
+// distortion): what a detector finds of edges cut by the image border.
+std::vector<ImageLine> ClippedToImage(const std::vector<ImageLine>& lines, const Camera& camera) {
+  std::vector<ImageLine> out;
+  for (const ImageLine& l : lines) {
+    const Eigen::Vector2d d = l.b - l.a;
+    double t0 = 0, t1 = 1;
+    const double p[4] = {-d.x(), d.x(), -d.y(), d.y()};
+    const double q[4] = {l.a.x(), camera.width() - 1 - l.a.x(), l.a.y(), camera.height() - 1 - l.a.y()};
+    bool inside = true;
+    for (int k = 0; k < 4 && inside; ++k) {
+      if (p[k] == 0) {
+        inside = q[k] >= 0;
+      } else if (p[k] < 0) {
+        t0 = std::max(t0, q[k] / p[k]);
+      } else {
+        t1 = std::min(t1, q[k] / p[k]);
+      }
+    }
+    if (inside && t1 - t0 > 1e-9) out.push_back({l.a + t0 * d, l.a + t1 * d});
+  }
+  return out;
+}
+
+// A block cut by the image's left border: the lines on its edges inside the image match about the
+// same share of what the image can show as lines on a whole block do, while of the whole visible
+// edges they match only about that share times the part inside (RecognizerOptions::
+// matched_share_in_image). A block wholly inside, and one behind the camera, keep their share.
+TEST(HypothesisFitTest, TheMatchedShareCountsOnlyTheOutlineInsideTheImage) {
+  const Camera camera = SyntheticCamera();
+  const Eigen::Matrix3d K = camera.K();
+  const Model bar = Bar();
+  const double max_angle = 8 * M_PI / 180;
+  const geometry::Pose3 world_T_inside = OnTable(bar.box_size_m, 0.01, -0.02, 0.7);
+  const geometry::Pose3 camera_T_inside = camera.camera_T_world() * world_T_inside;
+  ASSERT_DOUBLE_EQ(VisibleOutlineInImage(bar, camera, camera_T_inside), 1);
+  const EdgeMatchSet whole =
+      MatchEdges(bar, K, camera_T_inside, EdgeLines(bar, K, camera_T_inside), 6, max_angle);
+  EdgeMatchSet same = whole;
+  MatchedWithinImage(bar, camera, camera_T_inside, same);
+  EXPECT_EQ(same.matched_fraction, whole.matched_fraction);
+  EXPECT_EQ(same.visible_length_px, whole.visible_length_px);
+  EXPECT_NEAR(whole.matched_fraction, 0.8, 0.01);  // the middle 80 % of each edge
+
+  geometry::Pose3 world_T_cut = world_T_inside;
+  while (VisibleOutlineInImage(bar, camera, camera.camera_T_world() * world_T_cut) > 0.55) {
+    world_T_cut.translation += Eigen::Vector3d(-0.001, -0.001, 0);  // towards the image's left
+  }
+  const geometry::Pose3 camera_T_cut = camera.camera_T_world() * world_T_cut;
+  const double inside = VisibleOutlineInImage(bar, camera, camera_T_cut);
+  EdgeMatchSet cut =
+      MatchEdges(bar, K, camera_T_cut, ClippedToImage(EdgeLines(bar, K, camera_T_cut), camera), 6, max_angle);
+  const EdgeMatchSet before = cut;
+  EXPECT_LT(before.matched_fraction, 0.6);
+  MatchedWithinImage(bar, camera, camera_T_cut, cut);
+  EXPECT_NEAR(cut.visible_length_px, inside * before.visible_length_px, 1e-9);
+  EXPECT_NEAR(cut.matched_fraction, before.matched_fraction / inside, 1e-9);
+  EXPECT_NEAR(cut.matched_fraction, 0.8, 0.1);
+  EXPECT_GT(cut.matched_fraction, RecognizerOptions{}.min_matched_edge_fraction);
+  // Not for a pose with less of its outline inside than asked (RecognizerOptions::
+  // matched_share_min_in_image): there a wrong model reaching past the border is unconstrained.
+  EdgeMatchSet mostly_outside = before;
+  MatchedWithinImage(bar, camera, camera_T_cut, mostly_outside, inside + 0.01);
+  EXPECT_EQ(mostly_outside.matched_fraction, before.matched_fraction);
+
+  const geometry::Pose3 behind(Eigen::Quaterniond::Identity(), Eigen::Vector3d(0, 0, -1));
+  EdgeMatchSet far = before;
+  MatchedWithinImage(bar, camera, behind, far);
+  EXPECT_EQ(far.matched_fraction, before.matched_fraction);
 }
 
 // EdgePixelAcross first looks at the dilated edges (EdgeMap::near, kEdgeNearPx in x and y) and

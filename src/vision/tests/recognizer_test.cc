@@ -273,6 +273,9 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o.alternatives_per_model = 0;
   EXPECT_NE(o.Validate().message().find("alternatives_per_model"), std::string::npos);
   o = RecognizerOptions();
+  o.matched_share_min_in_image = 1.5;
+  EXPECT_NE(o.Validate().message().find("matched_share_min_in_image"), std::string::npos);
+  o = RecognizerOptions();
   o.accept_evidence_score = 0.1;  // below min_evidence_score
   EXPECT_NE(o.Validate().message().find("accept_evidence_score = 0.1 must be >= min_evidence_score"),
             std::string::npos)

@@ -22,7 +22,10 @@
 // cannyhigh-X, eps-X, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX,
 // stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX, alternatives-N (0: no other models
 // fitted at the candidates' places), permodel-N (places per model among them), skip-any-claim (a
-// corner's support hypotheses skipped once a candidate of any model matched its segments), refitrms-PX, refitcoverage-X, refitscore-X, refitinimage-X (the
+// corner's support hypotheses skipped once a candidate of any model matched its segments),
+// matched-whole-edges (the matched share of the whole visible edges, the parts outside the image
+// included) and matchedinimage-X (the share of the outline inside the image from which the matched
+// share is of that part only), refitrms-PX, refitcoverage-X, refitscore-X, refitinimage-X (the
 // edge-point refit's limits; no-refit switches it off), balance-N (the non-maximum suppression's pairwise
 // margin; 0: off), ownlead-N and rankshare-X (its second way to replace a rival; ownlead-0: off),
 // inimagelead-X and tieshare-X (its third way, where neither own outline shows; inimagelead-0: off),
@@ -489,6 +492,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "no-polish") return o->polish_pose = false, std::nullopt;
   if (a == "no-refit") return o->edge_point_refit = false, std::nullopt;
   if (a == "skip-any-claim") return o->skip_corners_claimed_by_any_model = true, std::nullopt;
+  if (a == "matched-whole-edges") return o->matched_share_in_image = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
   const std::size_t dash = a.rfind('-');
   const std::string name = dash == std::string::npos ? a : a.substr(0, dash);
@@ -519,6 +523,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"stepoffset", [o](double v) { o->step_offset_px = v; }},
       {"alternatives", [o](double v) { o->max_alternative_fits = static_cast<int>(v); }},
       {"permodel", [o](double v) { o->alternatives_per_model = static_cast<int>(v); }},
+      {"matchedinimage", [o](double v) { o->matched_share_min_in_image = v; }},
 
       {"refitrms", [o](double v) { o->refit_max_rms_px = v; }},
       {"refitcoverage", [o](double v) { o->refit_min_coverage = v; }},
@@ -533,12 +538,15 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
-    return "unknown ablation (no-support, plane-only, no-polish, no-refit, skip-any-claim, rules-only, index-N, "
+    return "unknown ablation (no-support, plane-only, no-polish, no-refit, skip-any-claim, "
+           "matched-whole-edges, "
+           "rules-only, index-N, "
            "support-N, "
            "contrast-X, "
            "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, eps-X, "
            "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
-           "stepgrey-X, stepoffset-PX, alternatives-N, permodel-N, refitrms-PX, refitcoverage-X, refitscore-X, "
+           "stepgrey-X, stepoffset-PX, alternatives-N, permodel-N, matchedinimage-X, refitrms-PX, "
+           "refitcoverage-X, refitscore-X, "
            "refitinimage-X, "
            "balance-N, ownlead-N, rankshare-X, inimagelead-X, tieshare-X, centreslack-MM)";
   }

@@ -212,6 +212,12 @@ bool StandsOnSupports(const geometry::Aabb& object, const std::vector<geometry::
 double VisibleOutlineInImage(const Model& model, const Camera& camera,
                              const geometry::Pose3& camera_T_object);
 
+// A match set's visible length and matched share restricted to the part of the visible predicted
+// edges inside the image (VisibleOutlineInImage; RecognizerOptions::matched_share_in_image): the
+// image cannot show a block's edges past its border. Unchanged when the whole outline is inside or
+// none of it is.
+void MatchedWithinImage(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                        EdgeMatchSet& matched, double min_inside = 0);
 // Verification's edge-point refit (RecognizerOptions::edge_point_refit): a fitted pose whose matched lines
 // lie off its predicted edges (a grain line or a shadow beside an edge was matched) polished in 6 DOF on
 // the image's edge points (PolishPose). The refitted pose when at least refit_min_in_image of its visible
