@@ -51,6 +51,18 @@ run_within() {
   timeout --kill-after=30 "$limit" "$@"
 }
 
+# Ends stage $1 by its status $2: 0 done ($3), 124 stopped at the budget ($4), else failed (exits).
+conclude() {
+  if (($2 == 0)); then
+    finish "$1" "$3"
+  elif (($2 == 124)); then
+    finish "$1" "STOPPED at the time budget ($4)"
+  else
+    finish "$1" "FAILED"
+    exit "$2"
+  fi
+}
+
 # ctest "$@" in the current folder with at most $1 seconds, its output also in ctest-run.log. When
 # stopped at the limit, 124 only if none of the tests that had finished failed (else 1).
 ctest_within() {
@@ -78,27 +90,14 @@ else
     begin "sanitizer build"
     status=0
     run_within "$limit" bash scripts/build.sh asan || status=$?
-    if ((status == 124)); then
-      finish "sanitizer build" "STOPPED at the time budget (not finished; its tests did not run)"
-    elif ((status != 0)); then
-      finish "sanitizer build" "FAILED"
-      exit "$status"
-    else
-      finish "sanitizer build" "done"
+    conclude "sanitizer build" "$status" "done" "not finished; its tests did not run"
+    if ((status == 0)); then
       begin "sanitizer tests"
-      status=0
       (cd build-asan && export ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
          TEACHSIM_SANITIZER_BUILD=1 &&
          ctest_within "$(left "$reserve")" --output-on-failure --timeout 900 -j "$(nproc)" -LE slow) \
         || status=$?
-      if ((status == 124)); then
-        finish "sanitizer tests" "STOPPED at the time budget (those that had finished passed)"
-      elif ((status != 0)); then
-        finish "sanitizer tests" "FAILED"
-        exit "$status"
-      else
-        finish "sanitizer tests" "passed"
-      fi
+      conclude "sanitizer tests" "$status" "passed" "those that had finished passed"
     fi
   fi
 fi
@@ -121,12 +120,5 @@ else
   if ((status == 0)); then
     (cd build-fuzz && ctest_within "$(left)" -L fuzz --output-on-failure -j "$(nproc)") || status=$?
   fi
-  if ((status == 124)); then
-    finish "fuzzing" "STOPPED at the time budget (those that had finished passed)"
-  elif ((status != 0)); then
-    finish "fuzzing" "FAILED"
-    exit "$status"
-  else
-    finish "fuzzing" "passed"
-  fi
+  conclude "fuzzing" "$status" "passed" "those that had finished passed"
 fi
