@@ -1359,7 +1359,9 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     // The matched share's rule on what the image can show (RecognizerOptions::matched_share_in_image);
     // the evidence keeps the share of the whole visible edges, the feature its score was fitted on.
     auto enough_matched = [&](const EdgeMatchSet& matched, const geometry::Pose3& camera_T_object) {
-      EdgeMatchSet in_image = matched;
+      EdgeMatchSet in_image;  // the two figures the rule needs, not the matches themselves
+      in_image.matched_fraction = matched.matched_fraction;
+      in_image.visible_length_px = matched.visible_length_px;
       if (options_.matched_share_in_image) {
         MatchedWithinImage(model, camera, camera_T_object, in_image, options_.matched_share_min_in_image);
       }
