@@ -89,6 +89,9 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(positive("match_angle_deg", match_angle_deg));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_matched_edge_fraction", min_matched_edge_fraction));
   TEACHSIM_RETURN_IF_ERROR(fraction("matched_share_min_in_image", matched_share_min_in_image));
+  TEACHSIM_RETURN_IF_ERROR(fraction("occlusion_min_hidden_share", occlusion_min_hidden_share));
+  TEACHSIM_RETURN_IF_ERROR(fraction("occlusion_min_shown_share", occlusion_min_shown_share));
+  TEACHSIM_RETURN_IF_ERROR(fraction("occlusion_min_evidence_score", occlusion_min_evidence_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_score", min_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_coverage", min_coverage));
   if (!(min_edge_contrast >= 0)) return Status::InvalidInput("RecognizerOptions::min_edge_contrast must be >= 0");
@@ -648,6 +651,46 @@ std::vector<LineMatch> ClosestMatchesPerEdge(const Model& model, const Eigen::Ma
   return out;
 }
 
+// A box that hides what lies behind it, shrunk by a margin so that edges on its own outline and
+// edges touching it are not hidden.
+struct Occluder {
+  geometry::Pose3 box_T_camera;
+  Eigen::Vector3d half;  // half the shrunk box's size, m
+};
+
+std::optional<Occluder> MakeOccluder(const Model& model, const geometry::Pose3& camera_T_box,
+                                     double margin_m) {
+  const Eigen::Vector3d half = 0.5 * model.box_size_m - Eigen::Vector3d::Constant(margin_m);
+  if ((half.array() <= 0).any()) return std::nullopt;
+  return Occluder{camera_T_box.Inverse(), half};
+}
+
+// Whether the segment from the camera to a point (camera frame) passes through the occluder's box
+// (slab test, in the box's frame).
+bool Hides(const Occluder& o, const Eigen::Vector3d& point_in_camera) {
+  const Eigen::Vector3d& origin = o.box_T_camera.translation;
+  const Eigen::Vector3d d = o.box_T_camera * point_in_camera - origin;
+  double t0 = 0, t1 = 1;
+  for (int a = 0; a < 3 && t0 <= t1; ++a) {
+    if (std::abs(d[a]) < 1e-12) {
+      if (std::abs(origin[a]) > o.half[a]) return false;
+      continue;
+    }
+    double ta = (-o.half[a] - origin[a]) / d[a], tb = (o.half[a] - origin[a]) / d[a];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  return t0 <= t1;
+}
+
+bool HiddenByAny(const std::vector<Occluder>& occluders, const Eigen::Vector3d& point_in_camera) {
+  for (const Occluder& o : occluders) {
+    if (Hides(o, point_in_camera)) return true;
+  }
+  return false;
+}
+
 // Occlusion consistency: the samples of `behind`'s predicted edges that show an image edge (as in
 // the evidence's edge support) but that `front`, were it there, would hide (the ray from the camera to the edge
 // point passes through front's box, shrunk by kHideMarginM so that edges on front's own outline
@@ -655,31 +698,28 @@ std::vector<LineMatch> ClosestMatchesPerEdge(const Model& model, const Eigen::Ma
 int HiddenSupportedSamples(const Model& behind_model, const geometry::Pose3& camera_T_behind, const Model& front_model,
                            const geometry::Pose3& camera_T_front, const Camera& camera, const EdgeMap& edge_map) {
   constexpr double kHideMarginM = 0.004;
-  const Eigen::Vector3d half = 0.5 * front_model.box_size_m - Eigen::Vector3d::Constant(kHideMarginM);
-  if ((half.array() <= 0).any()) return 0;
-  const geometry::Pose3 front_T_camera = camera_T_front.Inverse();
-  const Eigen::Vector3d origin = front_T_camera.translation;
+  const std::optional<Occluder> front = MakeOccluder(front_model, camera_T_front, kHideMarginM);
+  if (!front) return 0;
   int hidden = 0;
   ForEachOutlineSample(
       behind_model.box_size_m, camera_T_behind, camera,
       [&](const Eigen::Vector3d& point, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int) {
-        // Segment camera -> point against the shrunk box (slab test), in front's frame.
-        const Eigen::Vector3d target = front_T_camera * point;
-        const Eigen::Vector3d d = target - origin;
-        double t0 = 0, t1 = 1;
-        for (int a = 0; a < 3 && t0 <= t1; ++a) {
-          if (std::abs(d[a]) < 1e-12) {
-            if (std::abs(origin[a]) > half[a]) t1 = -1;
-            continue;
-          }
-          double ta = (-half[a] - origin[a]) / d[a], tb = (half[a] - origin[a]) / d[a];
-          if (ta > tb) std::swap(ta, tb);
-          t0 = std::max(t0, ta);
-          t1 = std::min(t1, tb);
-        }
-        if (t0 <= t1 && EdgeAcross(edge_map, c, normal)) ++hidden;
+        if (Hides(*front, point) && EdgeAcross(edge_map, c, normal)) ++hidden;
       });
   return hidden;
+}
+
+// The share of a pose's outline samples inside the image that the occluders hide.
+double HiddenOutlineShare(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                          const std::vector<Occluder>& occluders) {
+  int hidden = 0, total = 0;
+  ForEachOutlineSample(
+      model.box_size_m, camera_T_object, camera,
+      [&](const Eigen::Vector3d& point, const Eigen::Vector2d&, const Eigen::Vector2d&, int) {
+        ++total;
+        hidden += HiddenByAny(occluders, point) ? 1 : 0;
+      });
+  return total > 0 ? static_cast<double>(hidden) / total : 0;
 }
 
 // The evidence for a pose (what verification decides on): matched lines and their residuals, and
@@ -687,10 +727,12 @@ int HiddenSupportedSamples(const Model& behind_model, const geometry::Pose3& cam
 // supported by a Canny edge within 2 px across the edge whose gradient is across the edge. Where the
 // image shows no contrast across the predicted edge (a lit face against the lit table) no edge can be
 // expected: such samples are uninformative and left out of support_fraction (not of coverage). The
-// free_* fields leave out the samples that run along the fixed world's edges.
+// free_* fields leave out the samples that run along the fixed world's edges. With occluders, the
+// samples they hide are left out altogether (the occlusion pass, RecognizerOptions::occlusion_reverify).
 PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                              const LineDetection& detection, const FixedEdgeMap* fixed,
-                             const RecognizerOptions& options, const EdgeMatchSet& set) {
+                             const RecognizerOptions& options, const EdgeMatchSet& set,
+                             const std::vector<Occluder>* occluders = nullptr) {
   const Eigen::Matrix3d K = camera.K();
   PoseEvidence out;
   out.matched_fraction = set.matched_fraction;
@@ -710,7 +752,8 @@ PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geo
   int step_supported = 0;
   ForEachOutlineSample(
       model.box_size_m, camera_T_object, camera,
-      [&](const Eigen::Vector3d&, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int e) {
+      [&](const Eigen::Vector3d& point, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int e) {
+        if (occluders != nullptr && HiddenByAny(*occluders, point)) return;
         PerEdge& pe = per_edge[static_cast<size_t>(e)];
         ++samples;
         ++pe.samples;
@@ -1350,76 +1393,89 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     trace->fitted.push_back({model_index, kind, initial, initial, {}, Outcome::kFitFailed, false});
     return &trace->fitted.back();
   };
+  // The matched share's rule on what the image can show (RecognizerOptions::matched_share_in_image);
+  // the evidence keeps the share of the whole visible edges, the feature its score was fitted on.
+  auto enough_matched = [&](const Model& model, const EdgeMatchSet& matched,
+                            const geometry::Pose3& camera_T_object) {
+    EdgeMatchSet in_image;  // the two figures the rule needs, not the matches themselves
+    in_image.matched_fraction = matched.matched_fraction;
+    in_image.visible_length_px = matched.visible_length_px;
+    if (options_.matched_share_in_image) {
+      MatchedWithinImage(model, camera, camera_T_object, in_image, options_.matched_share_min_in_image);
+    }
+    return in_image.matched_fraction >= options_.min_matched_edge_fraction;
+  };
+  // Culling (§7.1): outside the work site, under the table, inside a fixed object.
+  auto implausible = [&](const Model& model, const geometry::Pose3& camera_T_object) {
+    const geometry::Pose3 world_T_object = world_T_camera * camera_T_object;
+    if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m) return true;
+    if (LowestZ(model, world_T_object) < table_top_z - options_.below_table_tolerance_m) return true;
+    for (const FixedPart& part : fixed_parts) {
+      if (PartPenetration(model, world_T_object, part, false).depth_m >
+          std::max(0.005, 0.2 * model.box_size_m.minCoeff())) {
+        return true;
+      }
+    }
+    return false;
+  };
+  // The rules after the matched share: the RMS of all matched segments against the final pose, or,
+  // when only the segments closest to each predicted edge are within the limit (a shadow or grain
+  // line runs beside an edge), stronger evidence: support along most of the predicted outline and no image
+  // edges running on past its corners (a wrong, smaller model fitted onto part of a real block);
+  // edge support; not part of a larger straight-edged thing (a cube fitted onto a bar, an upright
+  // block onto the dark cylinder: image edges run on past two or more of its corners for most of
+  // the edge's length while little of its own outline is supported). Then the step rule and the
+  // evidence score (below). The verdict: kCandidate or why not.
+  auto judge = [&](const PoseEvidence& e, double* rms_px) {
+    const bool trimmed_rms = e.rms_px > options_.max_reprojection_rms_px;
+    *rms_px = trimmed_rms ? std::min(e.rms_px, e.rms_closest_px) : e.rms_px;
+    Outcome rule = Outcome::kCandidate;
+    if (*rms_px > options_.max_reprojection_rms_px) {
+      rule = Outcome::kReprojection;
+    } else if (e.support_fraction < options_.min_score || e.coverage < options_.min_coverage ||
+               (trimmed_rms &&
+                (e.matched_fraction < kTrimmedMinMatchedFraction || e.coverage < kTrimmedMinCoverage ||
+                 e.continued_ends > kTrimmedMaxContinuedEnds)) ||
+               (e.long_continued_ends >= kPartMinContinuedEnds && e.coverage < kPartMaxCoverage)) {
+      rule = Outcome::kSupport;
+    }
+    // Outline along thin lines: where most of the supported outline is a thin line (wood grain
+    // inside a face, a scratch) and not a step in grey level between two surfaces, the pose is a
+    // wrong model laid onto a block's texture, whatever the rest of its evidence.
+    if (!StepRule(e, options_)) return Outcome::kSupport;
+    // The evidence score over all of it (EvidenceScore): required of a pose that passes the rules,
+    // and enough on its own when it is high.
+    const double score = EvidenceScore(e);
+    if (rule == Outcome::kCandidate) return score < options_.min_evidence_score ? Outcome::kEvidence : rule;
+    return score < options_.accept_evidence_score ? rule : Outcome::kCandidate;
+  };
+  // Poses verification turned down for want of evidence, judged again after the selection where
+  // accepted recognitions hide part of them (RecognizerOptions::occlusion_reverify).
+  struct Rejected {
+    int model = 0;
+    FitResult fit;
+    int trace_index = -1;
+  };
+  std::vector<Rejected> rejected;
   // Verification and culling of a fitted pose; a candidate when it passes.
   auto verify = [&](int model_index, FitResult fit, RecognitionTrace::Fitted* traced) {
     const Model& model = models_.models[static_cast<size_t>(model_index)];
     auto reject = [&](Outcome outcome) {
       if (traced != nullptr) traced->outcome = outcome;
-    };
-    // The matched share's rule on what the image can show (RecognizerOptions::matched_share_in_image);
-    // the evidence keeps the share of the whole visible edges, the feature its score was fitted on.
-    auto enough_matched = [&](const EdgeMatchSet& matched, const geometry::Pose3& camera_T_object) {
-      EdgeMatchSet in_image;  // the two figures the rule needs, not the matches themselves
-      in_image.matched_fraction = matched.matched_fraction;
-      in_image.visible_length_px = matched.visible_length_px;
-      if (options_.matched_share_in_image) {
-        MatchedWithinImage(model, camera, camera_T_object, in_image, options_.matched_share_min_in_image);
+      if (options_.occlusion_reverify && outcome != Outcome::kImplausible && outcome != Outcome::kCandidate) {
+        rejected.push_back(
+            {model_index, fit, traced != nullptr ? static_cast<int>(trace->fitted.size()) - 1 : -1});
       }
-      return in_image.matched_fraction >= options_.min_matched_edge_fraction;
     };
     EdgeMatchSet set =
         MatchEdges(model, K, fit.camera_T_object, lines, options_.match_distance_px, match_angle);
-    if (!enough_matched(set, fit.camera_T_object)) {
+    if (!enough_matched(model, set, fit.camera_T_object)) {
       reject(Outcome::kMatchedFraction);
       return;
     }
-    // Culling (§7.1): outside the work site, under the table, inside a fixed object.
-    auto implausible = [&](const geometry::Pose3& camera_T_object) {
-      const geometry::Pose3 world_T_object = world_T_camera * camera_T_object;
-      if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m) return true;
-      if (LowestZ(model, world_T_object) < table_top_z - options_.below_table_tolerance_m) return true;
-      for (const FixedPart& part : fixed_parts) {
-        if (PartPenetration(model, world_T_object, part, false).depth_m >
-            std::max(0.005, 0.2 * model.box_size_m.minCoeff())) {
-          return true;
-        }
-      }
-      return false;
-    };
-    if (implausible(fit.camera_T_object)) return reject(Outcome::kImplausible);
+    if (implausible(model, fit.camera_T_object)) return reject(Outcome::kImplausible);
     PoseEvidence evidence =
         ComputeEvidence(model, camera, fit.camera_T_object, detection, &fixed_edges, options_, set);
-    // The rules after the matched share: the RMS of all matched segments against the final pose, or,
-    // when only the segments closest to each predicted edge are within the limit (a shadow or grain
-    // line runs beside an edge), stronger evidence: support along most of the predicted outline and no image
-    // edges running on past its corners (a wrong, smaller model fitted onto part of a real block);
-    // edge support; not part of a larger straight-edged thing (a cube fitted onto a bar, an upright
-    // block onto the dark cylinder: image edges run on past two or more of its corners for most of
-    // the edge's length while little of its own outline is supported). Then the step rule and the
-    // evidence score (below). The verdict: kCandidate or why not.
-    auto judge = [&](const PoseEvidence& e, double* rms_px) {
-      const bool trimmed_rms = e.rms_px > options_.max_reprojection_rms_px;
-      *rms_px = trimmed_rms ? std::min(e.rms_px, e.rms_closest_px) : e.rms_px;
-      Outcome rule = Outcome::kCandidate;
-      if (*rms_px > options_.max_reprojection_rms_px) {
-        rule = Outcome::kReprojection;
-      } else if (e.support_fraction < options_.min_score || e.coverage < options_.min_coverage ||
-                 (trimmed_rms &&
-                  (e.matched_fraction < kTrimmedMinMatchedFraction || e.coverage < kTrimmedMinCoverage ||
-                   e.continued_ends > kTrimmedMaxContinuedEnds)) ||
-                 (e.long_continued_ends >= kPartMinContinuedEnds && e.coverage < kPartMaxCoverage)) {
-        rule = Outcome::kSupport;
-      }
-      // Outline along thin lines: where most of the supported outline is a thin line (wood grain
-      // inside a face, a scratch) and not a step in grey level between two surfaces, the pose is a
-      // wrong model laid onto a block's texture, whatever the rest of its evidence.
-      if (!StepRule(e, options_)) return Outcome::kSupport;
-      // The evidence score over all of it (EvidenceScore): required of a pose that passes the rules,
-      // and enough on its own when it is high.
-      const double score = EvidenceScore(e);
-      if (rule == Outcome::kCandidate) return score < options_.min_evidence_score ? Outcome::kEvidence : rule;
-      return score < options_.accept_evidence_score ? rule : Outcome::kCandidate;
-    };
     Outcome outcome = judge(evidence, &fit.rms_px);
     double rank_score = -1;  // set by the refit
     // A second chance, the edge-point refit (RecognizerOptions::edge_point_refit), for a pose whose
@@ -1440,7 +1496,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
               ? RefitOnEdgePoints(model, camera, fit.camera_T_object, detection.edge_map, table_top_z,
                                   options_)
               : std::nullopt;
-      if (polished && !implausible(polished->fit.camera_T_object)) {
+      if (polished && !implausible(model, polished->fit.camera_T_object)) {
         EdgeMatchSet refit_set = MatchEdges(model, K, polished->fit.camera_T_object, lines,
                                             options_.match_distance_px, match_angle);
         PoseEvidence refit_evidence = ComputeEvidence(model, camera, polished->fit.camera_T_object, detection,
@@ -1448,7 +1504,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
         const double lines_score = EvidenceScore(refit_evidence);
         refit_evidence.rms_px = refit_evidence.rms_closest_px = polished->rms_px;
         double rms_px = 0;
-        if (enough_matched(refit_set, polished->fit.camera_T_object) &&
+        if (enough_matched(model, refit_set, polished->fit.camera_T_object) &&
             judge(refit_evidence, &rms_px) == Outcome::kCandidate &&
             EvidenceScore(refit_evidence) >= options_.refit_accept_score) {
           fit = polished->fit;
@@ -1462,7 +1518,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       }
     }
     if (outcome != Outcome::kCandidate) return reject(outcome);
-    reject(Outcome::kCandidate);
+    if (traced != nullptr) traced->outcome = Outcome::kCandidate;
     Candidate c;
     c.trace_index = traced != nullptr ? static_cast<int>(trace->fitted.size()) - 1 : -1;
     c.model = model_index;
@@ -1658,12 +1714,18 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   }
   order = supported_subset(order);
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return rank[a] > rank[b]; });
+  // Two poses that interpenetrate this deeply are the same object or one of them is wrong.
+  auto interpenetrate = [&](int model_c, const geometry::Pose3& camera_T_c, const Candidate& a) {
+    const Model& mc = models_.models[static_cast<size_t>(model_c)];
+    const Model& ma = models_.models[static_cast<size_t>(a.model)];
+    const Penetration pen = BoxBoxPenetration(mc.box_size_m, world_T_camera * camera_T_c, ma.box_size_m,
+                                              world_T_camera * a.camera_T_object, false);
+    return pen.depth_m > 0.25 * std::min(mc.box_size_m.minCoeff(), ma.box_size_m.minCoeff());
+  };
   auto conflicting = [&](const Candidate& c, const Candidate& a) {
     const Model& mc = models_.models[static_cast<size_t>(c.model)];
     const Model& ma = models_.models[static_cast<size_t>(a.model)];
-    const Penetration pen = BoxBoxPenetration(mc.box_size_m, world_T_camera * c.camera_T_object,
-                                              ma.box_size_m, world_T_camera * a.camera_T_object, false);
-    if (pen.depth_m > 0.25 * std::min(mc.box_size_m.minCoeff(), ma.box_size_m.minCoeff())) return true;
+    if (interpenetrate(c.model, c.camera_T_object, a)) return true;
     std::set<int> sa(a.matches.segments.begin(), a.matches.segments.end());
     int shared = 0;
     for (int s : c.matches.segments) shared += sa.count(s) ? 1 : 0;
@@ -1709,6 +1771,125 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   }
 
   accepted = supported_subset(accepted);
+  const auto t_occlusion = Clock::now();
+
+  // 5b. Blocks partly hidden by recognized ones (RecognizerOptions::occlusion_reverify): each pose
+  // verification turned down is judged again without the outline the accepted recognitions hide and
+  // without the image lines they claim (their edges end where a hidden block's do not). Those that
+  // pass, best ranked first, join the accepted ones unless they conflict with one.
+  if (options_.occlusion_reverify && !accepted.empty() && !rejected.empty()) {
+    // Which occluders can hide part of a pose: those whose boxes' images (pin-hole projections: a
+    // ray through both boxes maps to one point in both) overlap and that come nearer the camera.
+    struct ImageExtent {
+      Eigen::Vector2d lo, hi;
+      double near_z = 0, far_z = 0;
+      bool valid = false;  // no vertex behind or at the camera
+    };
+    auto image_extent = [&](const Model& model, const geometry::Pose3& camera_T_object) {
+      ImageExtent e;
+      e.lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
+      e.hi = -e.lo;
+      e.near_z = std::numeric_limits<double>::infinity();
+      e.far_z = -e.near_z;
+      for (int v = 0; v < 8; ++v) {
+        const Eigen::Vector3d p = camera_T_object * BoxVertex(model.box_size_m, v);
+        if (p.z() <= 1e-3) return e;
+        const Eigen::Vector2d px = (K * p).hnormalized();
+        e.lo = e.lo.cwiseMin(px);
+        e.hi = e.hi.cwiseMax(px);
+        e.near_z = std::min(e.near_z, p.z());
+        e.far_z = std::max(e.far_z, p.z());
+      }
+      e.valid = true;
+      return e;
+    };
+    constexpr double kOccluderMarginM = 0.001;
+    std::vector<Occluder> occluders;
+    std::vector<ImageExtent> occluder_extents;  // of each occluder
+    std::vector<bool> claimed(lines.size(), false);
+    for (size_t i : accepted) {
+      const Candidate& a = candidates[i];
+      const Model& model = models_.models[static_cast<size_t>(a.model)];
+      if (auto o = MakeOccluder(model, a.camera_T_object, kOccluderMarginM)) {
+        occluders.push_back(*o);
+        occluder_extents.push_back(image_extent(model, a.camera_T_object));
+      }
+      for (int seg : a.matches.segments) claimed[static_cast<size_t>(seg)] = true;
+    }
+    std::vector<ImageLine> free_lines;  // the lines no accepted recognition claims
+    std::vector<int> free_index;        // each one's index in `lines`
+    for (size_t l = 0; l < lines.size(); ++l) {
+      if (claimed[l]) continue;
+      free_lines.push_back(lines[l]);
+      free_index.push_back(static_cast<int>(l));
+    }
+    std::vector<Occluder> in_front;
+    std::vector<size_t> passed;
+    for (const Rejected& r : rejected) {
+      const Model& model = models_.models[static_cast<size_t>(r.model)];
+      const geometry::Pose3& pose = r.fit.camera_T_object;
+      const ImageExtent extent = image_extent(model, pose);
+      in_front.clear();
+      for (size_t k = 0; k < occluders.size(); ++k) {
+        const ImageExtent& o = occluder_extents[k];
+        if (!extent.valid || !o.valid ||
+            (o.near_z < extent.far_z && (o.lo.array() <= extent.hi.array()).all() &&
+             (extent.lo.array() <= o.hi.array()).all())) {
+          in_front.push_back(occluders[k]);
+        }
+      }
+      if (in_front.empty()) continue;
+      // One that interpenetrates an accepted recognition cannot join them (most turned-down poses
+      // are other fits of an accepted block): not judged again.
+      bool deep = false;
+      for (size_t k = 0; k < accepted.size() && !deep; ++k)
+        deep = interpenetrate(r.model, pose, candidates[accepted[k]]);
+      if (deep) continue;
+      const double hidden = HiddenOutlineShare(model, camera, pose, in_front);
+      if (hidden < options_.occlusion_min_hidden_share || 1 - hidden < options_.occlusion_min_shown_share)
+        continue;
+      if (implausible(model, pose)) continue;
+      EdgeMatchSet set = MatchEdges(model, K, pose, free_lines, options_.match_distance_px, match_angle);
+      for (int& seg : set.segments) seg = free_index[static_cast<size_t>(seg)];
+      // The matched share of the outline in view (the hidden share as the samples inside the image give it).
+      const double covered = set.matched_fraction * set.visible_length_px;
+      set.visible_length_px *= 1 - hidden;
+      set.matched_fraction = set.visible_length_px > 0 ? std::min(1.0, covered / set.visible_length_px) : 0;
+      if (!enough_matched(model, set, pose)) continue;
+      const PoseEvidence evidence =
+          ComputeEvidence(model, camera, pose, detection, &fixed_edges, options_, set, &in_front);
+      double rms_px = 0;
+      const Outcome verdict = judge(evidence, &rms_px);
+      const double score = EvidenceScore(evidence);
+      if (verdict != Outcome::kCandidate || score < options_.occlusion_min_evidence_score) continue;
+      Candidate c;
+      c.trace_index = r.trace_index;
+      c.model = r.model;
+      c.camera_T_object = pose;
+      c.fit = r.fit;
+      c.fit.rms_px = rms_px;
+      c.matches = std::move(set);
+      c.evidence = evidence;
+      c.rms_px = rms_px;
+      c.rank_score = score;
+      passed.push_back(candidates.size());
+      rank.push_back(NetSupportPx(evidence) * c.rank_score);
+      candidates.push_back(std::move(c));
+    }
+    std::stable_sort(passed.begin(), passed.end(), [&](size_t a, size_t b) { return rank[a] > rank[b]; });
+    for (size_t i : passed) {
+      bool conflict = false;
+      for (size_t k = 0; k < accepted.size() && !conflict; ++k) {
+        conflict = conflicting(candidates[i], candidates[accepted[k]]);
+      }
+      if (conflict) continue;
+      std::vector<size_t> with = accepted;
+      with.push_back(i);
+      if (supported_subset(with).size() == with.size()) accepted = std::move(with);
+    }
+  }
+
+  const double occlusion_ms = Ms(t_occlusion, Clock::now());
 
   // 6. the model editor's rules (§4.3).
   for (size_t i : accepted) {
@@ -1815,8 +1996,14 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     if (!moved) break;
   }
   const auto t5 = Clock::now();
-  result.timing_ms = {{"lines", Ms(t0, t1)},   {"groups", Ms(t1, t2)},         {"index", Ms(t2, t3)},
-                      {"support_hypotheses", support_ms}, {"fit_verify", Ms(t3, t4) - support_ms}, {"select_edit", Ms(t4, t5)}, {"total", Ms(t0, t5)}};
+  result.timing_ms = {{"lines", Ms(t0, t1)},
+                      {"groups", Ms(t1, t2)},
+                      {"index", Ms(t2, t3)},
+                      {"support_hypotheses", support_ms},
+                      {"fit_verify", Ms(t3, t4) - support_ms},
+                      {"select_edit", Ms(t4, t5) - occlusion_ms},
+                      {"occlusion", occlusion_ms},
+                      {"total", Ms(t0, t5)}};
   return result;
 }
 
