@@ -1842,12 +1842,14 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       // One that interpenetrates an accepted recognition cannot join them (most turned-down poses
       // are other fits of an accepted block): not judged again.
       bool deep = false;
-      for (size_t k = 0; k < accepted.size() && !deep; ++k)
+      for (size_t k = 0; k < accepted.size() && !deep; ++k) {
         deep = interpenetrate(r.model, pose, candidates[accepted[k]]);
+      }
       if (deep) continue;
       const double hidden = HiddenOutlineShare(model, camera, pose, in_front);
-      if (hidden < options_.occlusion_min_hidden_share || 1 - hidden < options_.occlusion_min_shown_share)
+      if (hidden < options_.occlusion_min_hidden_share || 1 - hidden < options_.occlusion_min_shown_share) {
         continue;
+      }
       if (implausible(model, pose)) continue;
       EdgeMatchSet set = MatchEdges(model, K, pose, free_lines, options_.match_distance_px, match_angle);
       for (int& seg : set.segments) seg = free_index[static_cast<size_t>(seg)];
