@@ -1045,5 +1045,47 @@ TEST(OcclusionTest, ABlockHiddenBehindARecognizedOneIsJudgedOnWhatIsInView) {
   EXPECT_EQ(alone->objects[0].model, "bar90");
 }
 
+// A block in front with grain on its faces along the hidden edges of a block behind it: the grain is a
+// thin line, not a step in grey level, so it does not count as a hidden edge showing through (the
+// selection's occlusion-consistency test), and both blocks are found. (Counting the grain, the cube
+// in front was dropped as hiding the bar's edges.)
+TEST(OcclusionTest, GrainOnTheFrontBlockAlongAHiddenEdgeIsNotAnEdgeShowingThrough) {
+  const Camera camera = SyntheticCamera();
+  const Eigen::Vector2d toward_camera(0.76, -0.65), across(0.65, 0.76);
+  // The cube 60 mm nearer the camera than the bar and 20 mm to the side: it hides one end of the bar.
+  const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0, 0, 0.86);
+  const Eigen::Vector2d cube_xy = 0.06 * toward_camera + 0.02 * across;
+  const geometry::Pose3 cube_pose = OnTable(Cube().box_size_m, cube_xy.x(), cube_xy.y(), 0.86);
+  cv::Mat image = RenderBoxes(camera, {{Cube().box_size_m, cube_pose}, {Bar().box_size_m, bar_pose}}, 7);
+  // The cube's silhouette, 4 px in from its outline.
+  cv::Mat mask;
+  cv::absdiff(RenderBoxes(camera, {{Cube().box_size_m, cube_pose}}, 7), RenderBoxes(camera, {}, 7), mask);
+  cv::threshold(mask, mask, 10, 255, cv::THRESH_BINARY);
+  cv::erode(mask, mask, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(9, 9)));
+  // Grain: the bar's edges that the cube hides drawn as 1 px dark lines on the cube's faces.
+  cv::Mat grain = image.clone();
+  const geometry::Pose3 camera_T_bar = camera.camera_T_world() * bar_pose;
+  const uint16_t visible = VisibleBoxEdges(Bar().box_size_m, camera_T_bar.Inverse().translation);
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    const auto a =
+        camera.Project(bar_pose * BoxVertex(Bar().box_size_m, kBoxEdges[static_cast<size_t>(e)][0]));
+    const auto b =
+        camera.Project(bar_pose * BoxVertex(Bar().box_size_m, kBoxEdges[static_cast<size_t>(e)][1]));
+    ASSERT_TRUE(a && b);
+    cv::line(grain, cv::Point2d(a->x(), a->y()), cv::Point2d(b->x(), b->y()), cv::Scalar(100), 1,
+             cv::LINE_AA);
+  }
+  grain.copyTo(image, mask);
+  auto result = RecognizeCubesAndBars(image, SmallIndexOptions(), nullptr);
+  ASSERT_TRUE(result.ok()) << result.status().message();
+  ASSERT_EQ(result->objects.size(), 2u);
+  for (const Recognition& r : result->objects) {
+    const bool cube = r.model == "cube45";
+    const geometry::Pose3& truth = cube ? cube_pose : bar_pose;
+    EXPECT_LT((r.raw_world_T_object.translation - truth.translation).norm(), 0.003) << r.model;
+  }
+}
+
 }  // namespace
 }  // namespace teachsim::vision
