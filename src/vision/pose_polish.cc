@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <optional>
 #include <vector>
 
@@ -21,8 +22,9 @@ constexpr int kMinPointsPerEdge = 4, kMinEdges = 3, kRounds = 2, kIterations = 1
 constexpr double kTukeyPx = 2, kMaxMovePx = 2;
 
 // The edge points near the predicted visible edges at a pose, as zero-length segments for the line fit.
-std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                                  const EdgeMap& edge_map, double search_px, int* edges_with_points) {
+std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera,
+                                  const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
+                                  double search_px, const HiddenTest& hidden, int* edges_with_points) {
   const Eigen::Matrix3d K = camera.K();
   const Intrinsics& k = camera.intrinsics();
   const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
@@ -41,6 +43,7 @@ std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera, cons
     for (int i = 0; i < n; ++i) {
       const double t = kCornerMargin + (1 - 2 * kCornerMargin) * (i + 0.5) / n;
       const Eigen::Vector3d x = a + t * (b - a);
+      if (hidden && hidden(x)) continue;
       const auto here = camera.ProjectFromCamera(x, 0.05);
       const auto ahead = camera.ProjectFromCamera(x + 0.01 * (b - a), 0.05);
       if (!here || !ahead || !camera.InImage(*here)) continue;
@@ -67,14 +70,14 @@ std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera, cons
 }  // namespace
 
 PolishResult PolishPose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                        const EdgeMap& edge_map, bool on_plane, double search_px) {
+                        const EdgeMap& edge_map, bool on_plane, double search_px, const HiddenTest& hidden) {
   PolishResult out;
   const Eigen::Matrix3d K = camera.K();
   geometry::Pose3 pose = camera_T_object;
   std::vector<LineMatch> points;
   for (int round = 0; round < kRounds; ++round) {
     int edges = 0;
-    points = EdgePoints(model, camera, pose, edge_map, search_px, &edges);
+    points = EdgePoints(model, camera, pose, edge_map, search_px, hidden, &edges);
     if (edges < kMinEdges) return out;
     const RobustLoss loss{RobustLoss::Kind::kTukey, kTukeyPx};
     out.fit = on_plane ? FitPoseOnPlane(model.box_size_m, K, camera.camera_T_world(), pose, points, kIterations, loss)

@@ -653,6 +653,10 @@ std::vector<LineMatch> ClosestMatchesPerEdge(const Model& model, const Eigen::Ma
 
 // A box that hides what lies behind it, shrunk by a margin so that edges on its own outline and
 // edges touching it are not hidden.
+// An accepted recognition as an occluder of others: its box shrunk by this much, so that edges on its
+// own outline and edges touching it are not hidden.
+constexpr double kOccluderMarginM = 0.001;
+
 struct Occluder {
   geometry::Pose3 box_T_camera;
   Eigen::Vector3d half;  // half the shrunk box's size, m
@@ -1811,7 +1815,6 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       e.valid = true;
       return e;
     };
-    constexpr double kOccluderMarginM = 0.001;
     std::vector<Occluder> occluders;
     std::vector<ImageExtent> occluder_extents;  // of each occluder
     std::vector<bool> claimed(lines.size(), false);
@@ -1952,21 +1955,42 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       resting[k] = true;
       r.adjustments.push_back("rested on the table: moved " + Mm(move.norm()) +
                               (std::abs(ray.z()) > 0.1 ? " along the camera ray" : " vertically"));
-      // Fitted again where it now rests (x, y and yaw on the table) to the image's edge points
-      // along its outline (PolishPose): lines beside an edge no longer pull it.
-      if (options_.polish_pose) {
-        const PolishResult polished =
-            PolishPose(model, camera, camera.camera_T_world() * r.world_T_object, detection.edge_map, true);
-        if (polished.ok) {
-          const geometry::Pose3 before = r.world_T_object;
-          r.world_T_object = world_T_camera * polished.fit.camera_T_object;
-          r.reprojection_rms_px = polished.rms_px;
-          char buf[128];
-          std::snprintf(buf, sizeof(buf), "fitted on the table to %d edge points: moved %.2f mm, turned %.2f deg",
-                        polished.points, 1000 * (r.world_T_object.translation - before.translation).norm(),
-                        r.world_T_object.rotation.angularDistance(before.rotation) * 180 / M_PI);
-          r.adjustments.push_back(buf);
-        }
+    }
+  }
+  // Fitted again where it now rests (x, y and yaw on the table) to the image's edge points along its
+  // outline (PolishPose): lines beside an edge no longer pull it. The outline the other recognitions,
+  // where they now rest, hide (each box shrunk by 1 mm, as in the occlusion pass) is left out: there
+  // the front block's own edges would pull it.
+  if (options_.polish_pose) {
+    std::vector<std::optional<Occluder>> occluders;
+    for (const Recognition& o : result.objects) {
+      const Model& model = *std::find_if(models_.models.begin(), models_.models.end(),
+                                         [&](const Model& m) { return m.name == o.model; });
+      occluders.push_back(MakeOccluder(model, camera.camera_T_world() * o.world_T_object, kOccluderMarginM));
+    }
+    for (size_t k = 0; k < result.objects.size(); ++k) {
+      if (!resting[k]) continue;
+      Recognition& r = result.objects[k];
+      const Model& model = *std::find_if(models_.models.begin(), models_.models.end(),
+                                         [&](const Model& m) { return m.name == r.model; });
+      std::vector<Occluder> others;
+      for (size_t j = 0; j < occluders.size(); ++j) {
+        if (j != k && occluders[j]) others.push_back(*occluders[j]);
+      }
+      const geometry::Pose3 camera_T_object = camera.camera_T_world() * r.world_T_object;
+      const PolishResult polished =
+          PolishPose(model, camera, camera_T_object, detection.edge_map, true, 3,
+                     [&](const Eigen::Vector3d& point) { return HiddenByAny(others, point); });
+      if (polished.ok) {
+        const geometry::Pose3 before = r.world_T_object;
+        r.world_T_object = world_T_camera * polished.fit.camera_T_object;
+        r.reprojection_rms_px = polished.rms_px;
+        char buf[128];
+        std::snprintf(buf, sizeof(buf),
+                      "fitted on the table to %d edge points: moved %.2f mm, turned %.2f deg",
+                      polished.points, 1000 * (r.world_T_object.translation - before.translation).norm(),
+                      r.world_T_object.rotation.angularDistance(before.rotation) * 180 / M_PI);
+        r.adjustments.push_back(buf);
       }
     }
   }

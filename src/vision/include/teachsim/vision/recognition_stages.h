@@ -7,10 +7,10 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <functional>
+#include <opencv2/core.hpp>
 #include <optional>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "teachsim/geometry/aabb.h"
 #include "teachsim/geometry/pose.h"
@@ -191,8 +191,13 @@ struct PolishResult {
   int points = 0;      // edge points of the last round
   double rms_px = 0;   // their RMS distance to the polished pose's predicted edges, within the 2 px of Tukey's scale
 };
+// Whether a point on the predicted outline (camera frame, m) is hidden from the camera by something
+// else (the editor: by another recognition); such samples are left out of the polish, since the
+// edges found there are the front object's (empty: none is hidden).
+using HiddenTest = std::function<bool(const Eigen::Vector3d& point_in_camera)>;
 PolishResult PolishPose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                        const EdgeMap& edge_map, bool on_plane, double search_px = 3);
+                        const EdgeMap& edge_map, bool on_plane, double search_px = 3,
+                        const HiddenTest& hidden = {});
 
 // The world extent of a set of points (a recognition's box, a fixed part; at least one point), m.
 geometry::Aabb ExtentOf(const std::vector<Eigen::Vector3d>& points);
