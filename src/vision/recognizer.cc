@@ -651,12 +651,12 @@ std::vector<LineMatch> ClosestMatchesPerEdge(const Model& model, const Eigen::Ma
   return out;
 }
 
-// A box that hides what lies behind it, shrunk by a margin so that edges on its own outline and
-// edges touching it are not hidden.
-// An accepted recognition as an occluder of others: its box shrunk by this much, so that edges on its
-// own outline and edges touching it are not hidden.
+// An accepted recognition as an occluder of others (the occlusion pass, the editor's polish): its box
+// shrunk by this much, so that edges on its own outline and edges touching it are not hidden.
 constexpr double kOccluderMarginM = 0.001;
 
+// A box that hides what lies behind it, shrunk by a margin so that edges on its own outline and
+// edges touching it are not hidden.
 struct Occluder {
   geometry::Pose3 box_T_camera;
   Eigen::Vector3d half;  // half the shrunk box's size, m

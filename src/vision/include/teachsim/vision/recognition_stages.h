@@ -8,9 +8,10 @@
 #include <array>
 #include <cstdint>
 #include <functional>
-#include <opencv2/core.hpp>
 #include <optional>
 #include <vector>
+
+#include <opencv2/core.hpp>
 
 #include "teachsim/geometry/aabb.h"
 #include "teachsim/geometry/pose.h"
