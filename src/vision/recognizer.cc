@@ -1924,10 +1924,12 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   }
   std::vector<bool> resting(result.objects.size(), false);
   const Eigen::Vector3d camera_centre = world_T_camera.translation;
+  auto model_of = [&](const Recognition& r) -> const Model& {
+    return *std::find_if(models_.models.begin(), models_.models.end(), [&](const Model& m) { return m.name == r.model; });
+  };
   for (size_t k = 0; k < result.objects.size(); ++k) {
     Recognition& r = result.objects[k];
-    const Model& model = *std::find_if(models_.models.begin(), models_.models.end(),
-                                       [&](const Model& m) { return m.name == r.model; });
+    const Model& model = model_of(r);
     auto lowest = [&]() { return LowestZ(model, r.world_T_object); };
     if (lowest() - table_top_z > options_.table_snap_distance_m) continue;
     // Level a nearly flat face (the object cannot rest on the table tilted by a few degrees).
@@ -1964,15 +1966,12 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   if (options_.polish_pose) {
     std::vector<std::optional<Occluder>> occluders;
     for (const Recognition& o : result.objects) {
-      const Model& model = *std::find_if(models_.models.begin(), models_.models.end(),
-                                         [&](const Model& m) { return m.name == o.model; });
-      occluders.push_back(MakeOccluder(model, camera.camera_T_world() * o.world_T_object, kOccluderMarginM));
+      occluders.push_back(MakeOccluder(model_of(o), camera.camera_T_world() * o.world_T_object, kOccluderMarginM));
     }
     for (size_t k = 0; k < result.objects.size(); ++k) {
       if (!resting[k]) continue;
       Recognition& r = result.objects[k];
-      const Model& model = *std::find_if(models_.models.begin(), models_.models.end(),
-                                         [&](const Model& m) { return m.name == r.model; });
+      const Model& model = model_of(r);
       std::vector<Occluder> others;
       for (size_t j = 0; j < occluders.size(); ++j) {
         if (j != k && occluders[j]) others.push_back(*occluders[j]);
@@ -1996,9 +1995,6 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   }
   // Interpenetrating recognitions: the less certain one moves by the smallest separating move
   // (horizontal only when it rests on the table); then out of fixed objects.
-  auto model_of = [&](const Recognition& r) -> const Model& {
-    return *std::find_if(models_.models.begin(), models_.models.end(), [&](const Model& m) { return m.name == r.model; });
-  };
   for (int pass = 0; pass < 3; ++pass) {
     bool moved = false;
     for (size_t i = 0; i < result.objects.size(); ++i) {
