@@ -1261,6 +1261,288 @@ StageLoss ClassifyLoss(const Model& model, int model_index, const Camera& camera
   return out;
 }
 
+namespace {
+
+// 3. indexing: the k nearest model-view vectors of each group; their votes give p(model | group)
+// (Beis & Lowe). The hypotheses, most probable first.
+std::vector<Hypothesis> IndexHypotheses(const RecognizerIndex& index, const std::vector<Group>& groups,
+                                        const std::vector<ImageLine>& lines,
+                                        const RecognizerOptions& options) {
+  std::vector<Hypothesis> hypotheses;
+  constexpr double kSigma = 0.12;              // spread of an index vector's error (rad / weighted log ratio)
+  constexpr double kBackgroundDistance = 0.3;  // a neighbour this far is as likely as clutter
+  const double background = std::exp(-kBackgroundDistance * kBackgroundDistance / (2 * kSigma * kSigma));
+  for (int k = 0; k < kGroupKinds; ++k) {
+    if (!index.trees[k]) continue;
+    std::vector<int> members;
+    for (size_t g = 0; g < groups.size(); ++g) {
+      if (static_cast<int>(groups[g].kind) == k) members.push_back(static_cast<int>(g));
+    }
+    if (members.empty()) continue;
+    // The most salient groups (longest segments in all) when there are more than the search can
+    // afford: only the best max_hypotheses hypotheses are fitted, and on wood grain or clutter
+    // most groups are short texture lines.
+    if (static_cast<int>(members.size()) > options.max_index_queries) {
+      std::vector<double> length(groups.size(), 0.0);  // of each group's segments, px
+      for (int g : members) {
+        const Group& group = groups[static_cast<size_t>(g)];
+        for (int s = 0; s < GroupSegments(group.kind); ++s) {
+          length[static_cast<size_t>(g)] +=
+              lines[static_cast<size_t>(group.segments[static_cast<size_t>(s)])].Length();
+        }
+      }
+      const auto keep = members.begin() + options.max_index_queries;
+      std::partial_sort(members.begin(), keep, members.end(), [&](int a, int b) {
+        const double la = length[static_cast<size_t>(a)], lb = length[static_cast<size_t>(b)];
+        return la != lb ? la > lb : a < b;
+      });
+      members.erase(keep, members.end());
+    }
+    const size_t knn = static_cast<size_t>(std::min(options.neighbours, index.vectors[k].rows));
+    const nanoflann::SearchParams search(0, static_cast<float>(options.index_search_eps));
+    std::vector<uint32_t> found(knn);
+    std::vector<float> d2(knn);
+    std::vector<double> w(knn);
+    for (int g : members) {
+      const std::vector<float> query = IndexVector(groups[static_cast<size_t>(g)]);
+      nanoflann::KNNResultSet<float, uint32_t> neighbours(knn);
+      neighbours.init(found.data(), d2.data());
+      index.trees[k]->tree.findNeighbors(neighbours, query.data(), search);
+      const size_t count = neighbours.size();  // nearest first
+      double total = background;
+      std::map<int, double> per_model;
+      for (size_t j = 0; j < count; ++j) {
+        w[j] = std::exp(-d2[j] / (2 * kSigma * kSigma));
+        total += w[j];
+        per_model[index.entries[k][found[j]].model] += w[j];
+      }
+      for (size_t j = 0; j < count; ++j) {
+        const double p_model = per_model[index.entries[k][found[j]].model] / total;
+        // The neighbour's own weight orders the views within a model.
+        const double p = p_model * w[j] / std::max(w[0], 1e-300);
+        if (p < 1e-3) continue;
+        // Larger groups are more specific (paper §7.1): ties go to them.
+        hypotheses.push_back(
+            {p * (k == static_cast<int>(GroupKind::kChain4) ? 1.2 : 1.0), g, k, static_cast<int>(found[j])});
+      }
+    }
+  }
+  std::stable_sort(hypotheses.begin(), hypotheses.end(),
+                   [](const Hypothesis& a, const Hypothesis& b) { return a.probability > b.probability; });
+  return hypotheses;
+}
+
+// The fixed world: the table top's height and the other fixed objects' convex parts.
+struct FixedWorld {
+  double table_top_z = 0;
+  std::vector<FixedPart> parts;
+};
+
+FixedWorld ReadFixedWorld(const scene::Scene* fixed_world) {
+  FixedWorld out;
+  if (fixed_world == nullptr) return out;
+  for (const scene::SceneObject& o : fixed_world->objects) {
+    if (!o.fixed) continue;
+    if (o.name == "table") {
+      out.table_top_z = o.shape.WorldBounds(o.world_T_object).max.z();
+      continue;
+    }
+    for (const geometry::ShapePart& part : o.shape.parts()) {
+      const geometry::Pose3 world_T_part = o.world_T_object * part.shape_T_part;
+      FixedPart f;
+      f.name = o.name;
+      for (const Eigen::Vector3d& v : part.convex->vertices()) f.vertices.push_back(world_T_part * v);
+      for (const geometry::Face& face : part.convex->faces())
+        f.normals.push_back(world_T_part.Rotate(face.normal));
+      for (const geometry::Edge& e : part.convex->edges()) {
+        f.edge_dirs.push_back(world_T_part
+                                  .Rotate(part.convex->vertices()[static_cast<size_t>(e.v1)] -
+                                          part.convex->vertices()[static_cast<size_t>(e.v0)])
+                                  .normalized());
+      }
+      if (f.vertices.size() > 0) out.parts.push_back(std::move(f));
+    }
+  }
+  return out;
+}
+
+// The planes a block can rest on: the table and the fixed objects' flat tops above it.
+std::vector<SupportPlane> SupportPlanes(const FixedWorld& fixed, const RecognizerOptions& options) {
+  SupportPlane table;
+  table.z_m = fixed.table_top_z;
+  table.min_xy = Eigen::Vector2d::Constant(-options.work_area_radius_m);
+  table.max_xy = Eigen::Vector2d::Constant(options.work_area_radius_m);
+  std::vector<SupportPlane> planes = {table};
+  for (const FixedPart& part : fixed.parts) {
+    // A horizontal top face.
+    bool flat_top = false;
+    for (const Eigen::Vector3d& n : part.normals) flat_top = flat_top || n.z() > std::cos(1e-3);
+    if (!flat_top || part.vertices.empty()) continue;
+    SupportPlane top;
+    top.z_m = -1e9;
+    top.min_xy = Eigen::Vector2d::Constant(1e9);
+    top.max_xy = Eigen::Vector2d::Constant(-1e9);
+    for (const Eigen::Vector3d& v : part.vertices) {
+      top.z_m = std::max(top.z_m, v.z());
+      top.min_xy = top.min_xy.cwiseMin(v.head<2>());
+      top.max_xy = top.max_xy.cwiseMax(v.head<2>());
+    }
+    if (top.z_m > fixed.table_top_z + 1e-3) planes.push_back(top);
+  }
+  return planes;
+}
+
+// The rules after the matched share: the RMS of all matched segments against the final pose, or,
+// when only the segments closest to each predicted edge are within the limit (a shadow or grain
+// line runs beside an edge), stronger evidence: support along most of the predicted outline and no image
+// edges running on past its corners (a wrong, smaller model fitted onto part of a real block);
+// edge support; not part of a larger straight-edged thing (a cube fitted onto a bar, an upright
+// block onto the dark cylinder: image edges run on past two or more of its corners for most of
+// the edge's length while little of its own outline is supported). Then the step rule and the
+// evidence score (below). The verdict: kCandidate or why not.
+RecognitionTrace::Outcome Judge(const PoseEvidence& e, const RecognizerOptions& options, double* rms_px) {
+  using Outcome = RecognitionTrace::Outcome;
+  const bool trimmed_rms = e.rms_px > options.max_reprojection_rms_px;
+  *rms_px = trimmed_rms ? std::min(e.rms_px, e.rms_closest_px) : e.rms_px;
+  Outcome rule = Outcome::kCandidate;
+  if (*rms_px > options.max_reprojection_rms_px) {
+    rule = Outcome::kReprojection;
+  } else if (e.support_fraction < options.min_score || e.coverage < options.min_coverage ||
+             (trimmed_rms &&
+              (e.matched_fraction < kTrimmedMinMatchedFraction || e.coverage < kTrimmedMinCoverage ||
+               e.continued_ends > kTrimmedMaxContinuedEnds)) ||
+             (e.long_continued_ends >= kPartMinContinuedEnds && e.coverage < kPartMaxCoverage)) {
+    rule = Outcome::kSupport;
+  }
+  // Outline along thin lines: where most of the supported outline is a thin line (wood grain
+  // inside a face, a scratch) and not a step in grey level between two surfaces, the pose is a
+  // wrong model laid onto a block's texture, whatever the rest of its evidence.
+  if (!StepRule(e, options)) return Outcome::kSupport;
+  // The evidence score over all of it (EvidenceScore): required of a pose that passes the rules,
+  // and enough on its own when it is high.
+  const double score = EvidenceScore(e);
+  if (rule == Outcome::kCandidate) return score < options.min_evidence_score ? Outcome::kEvidence : rule;
+  return score < options.accept_evidence_score ? rule : Outcome::kCandidate;
+}
+
+// 6. The model editor's rules (paper §4.3), each adjustment reported in the recognition's
+// adjustments: a recognition near the table is levelled and rested on it along the camera ray, then
+// fitted again there to the image's edge points; interpenetrating recognitions are separated by
+// the smallest moves, and pushed out of fixed objects.
+void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, const EdgeMap& edge_map,
+                           const FixedWorld& fixed, const RecognizerOptions& options,
+                           std::vector<Recognition>* objects_io) {
+  std::vector<Recognition>& objects = *objects_io;
+  std::vector<bool> resting(objects.size(), false);
+  const Eigen::Vector3d camera_centre = camera.world_T_camera().translation;
+  auto model_of = [&](const Recognition& r) -> const Model& {
+    return *std::find_if(models.models.begin(), models.models.end(),
+                         [&](const Model& m) { return m.name == r.model; });
+  };
+  for (size_t k = 0; k < objects.size(); ++k) {
+    Recognition& r = objects[k];
+    const Model& model = model_of(r);
+    auto lowest = [&]() { return LowestZ(model, r.world_T_object); };
+    if (lowest() - fixed.table_top_z > options.table_snap_distance_m) continue;
+    // Level a nearly flat face (the object cannot rest on the table tilted by a few degrees).
+    const Eigen::Matrix3d rot = r.world_T_object.RotationMatrix();
+    int axis = 0;
+    for (int a = 1; a < 3; ++a) {
+      if (std::abs(rot(2, a)) > std::abs(rot(2, axis))) axis = a;
+    }
+    const Eigen::Vector3d up_axis = rot.col(axis) * (rot(2, axis) >= 0 ? 1.0 : -1.0);
+    const double tilt = std::acos(std::clamp(up_axis.z(), -1.0, 1.0));
+    if (tilt <= options.table_snap_max_tilt_deg * M_PI / 180) {
+      if (tilt > 1e-9) {
+        const Eigen::Quaterniond level =
+            Eigen::Quaterniond::FromTwoVectors(up_axis, Eigen::Vector3d::UnitZ());
+        r.world_T_object.rotation = (level * r.world_T_object.rotation).normalized();
+        char buf[96];
+        std::snprintf(buf, sizeof(buf), "levelled onto the table: turned %.2f deg", tilt * 180 / M_PI);
+        r.adjustments.push_back(buf);
+      }
+      // Along the camera ray (the monocular system's weak direction, §4.2-4.3).
+      const Eigen::Vector3d ray = (r.world_T_object.translation - camera_centre).normalized();
+      const double dz = fixed.table_top_z - lowest();
+      const Eigen::Vector3d move =
+          std::abs(ray.z()) > 0.1 ? Eigen::Vector3d(ray * (dz / ray.z())) : Eigen::Vector3d(0, 0, dz);
+      r.world_T_object.translation += move;
+      resting[k] = true;
+      r.adjustments.push_back("rested on the table: moved " + Mm(move.norm()) +
+                              (std::abs(ray.z()) > 0.1 ? " along the camera ray" : " vertically"));
+    }
+  }
+  // Fitted again where it now rests (x, y and yaw on the table) to the image's edge points along its
+  // outline (PolishPose): lines beside an edge no longer pull it. The outline the other recognitions,
+  // where they now rest, hide (each box shrunk by 1 mm, as in the occlusion pass) is left out: there
+  // the front block's own edges would pull it.
+  if (options.polish_pose) {
+    std::vector<std::optional<Occluder>> occluders;
+    for (const Recognition& o : objects) {
+      occluders.push_back(
+          MakeOccluder(model_of(o), camera.camera_T_world() * o.world_T_object, kOccluderMarginM));
+    }
+    for (size_t k = 0; k < objects.size(); ++k) {
+      if (!resting[k]) continue;
+      Recognition& r = objects[k];
+      const Model& model = model_of(r);
+      std::vector<Occluder> others;
+      for (size_t j = 0; j < occluders.size(); ++j) {
+        if (j != k && occluders[j]) others.push_back(*occluders[j]);
+      }
+      const geometry::Pose3 camera_T_object = camera.camera_T_world() * r.world_T_object;
+      const PolishResult polished =
+          PolishPose(model, camera, camera_T_object, edge_map, true, 3,
+                     [&](const Eigen::Vector3d& point) { return HiddenByAny(others, point); });
+      if (polished.ok) {
+        const geometry::Pose3 before = r.world_T_object;
+        r.world_T_object = camera.world_T_camera() * polished.fit.camera_T_object;
+        r.reprojection_rms_px = polished.rms_px;
+        char buf[128];
+        std::snprintf(buf, sizeof(buf),
+                      "fitted on the table to %d edge points: moved %.2f mm, turned %.2f deg",
+                      polished.points, 1000 * (r.world_T_object.translation - before.translation).norm(),
+                      r.world_T_object.rotation.angularDistance(before.rotation) * 180 / M_PI);
+        r.adjustments.push_back(buf);
+      }
+    }
+  }
+  // Interpenetrating recognitions: the less certain one moves by the smallest separating move
+  // (horizontal only when it rests on the table); then out of fixed objects.
+  for (int pass = 0; pass < 3; ++pass) {
+    bool moved = false;
+    for (size_t i = 0; i < objects.size(); ++i) {
+      for (size_t j = 0; j < objects.size(); ++j) {
+        if (i == j || objects[i].score > objects[j].score ||
+            (objects[i].score == objects[j].score && i < j)) {
+          continue;  // i moves when it scores lower
+        }
+        Recognition& ri = objects[i];
+        const Recognition& rj = objects[j];
+        const Penetration pen = BoxBoxPenetration(model_of(ri).box_size_m, ri.world_T_object,
+                                                  model_of(rj).box_size_m, rj.world_T_object, resting[i]);
+        if (pen.depth_m <= 1e-5) continue;
+        ri.world_T_object.translation += pen.direction * (pen.depth_m + 1e-5);
+        ri.adjustments.push_back("separated from the " + rj.model + " recognized at (" +
+                                 Mm(rj.world_T_object.translation.x()) + ", " +
+                                 Mm(rj.world_T_object.translation.y()) + "): moved " + Mm(pen.depth_m));
+        moved = true;
+      }
+      for (const FixedPart& part : fixed.parts) {
+        Recognition& ri = objects[i];
+        const Penetration pen = PartPenetration(model_of(ri), ri.world_T_object, part, resting[i]);
+        if (pen.depth_m <= 1e-5) continue;
+        ri.world_T_object.translation += pen.direction * (pen.depth_m + 1e-5);
+        ri.adjustments.push_back("pushed out of " + part.name + ": moved " + Mm(pen.depth_m));
+        moved = true;
+      }
+    }
+    if (!moved) break;
+  }
+}
+
+}  // namespace
+
 Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, const Camera& camera,
                                                 const scene::Scene* fixed_world, RecognitionTrace* trace) const {
   if (image_gray8.empty() || image_gray8.type() != CV_8UC1) {
@@ -1285,69 +1567,8 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   const std::vector<Group> groups = FindGroups(lines, options_);
   const auto t2 = Clock::now();
 
-  // 3. indexing: k nearest model-view vectors per group; votes give p(model | group) (Beis & Lowe).
-  std::vector<Hypothesis> hypotheses;
-  {
-    constexpr double kSigma = 0.12;            // spread of an index vector's error (rad / weighted log ratio)
-    constexpr double kBackgroundDistance = 0.3;  // a neighbour this far is as likely as clutter
-    const double background = std::exp(-kBackgroundDistance * kBackgroundDistance / (2 * kSigma * kSigma));
-    for (int k = 0; k < kGroupKinds; ++k) {
-      if (!index.trees[k]) continue;
-      std::vector<int> members;
-      for (size_t g = 0; g < groups.size(); ++g) {
-        if (static_cast<int>(groups[g].kind) == k) members.push_back(static_cast<int>(g));
-      }
-      if (members.empty()) continue;
-      // The most salient groups (longest segments in all) when there are more than the search can
-      // afford: only the best max_hypotheses hypotheses are fitted, and on wood grain or clutter
-      // most groups are short texture lines.
-      if (static_cast<int>(members.size()) > options_.max_index_queries) {
-        std::vector<double> length(groups.size(), 0.0);  // of each group's segments, px
-        for (int g : members) {
-          const Group& group = groups[static_cast<size_t>(g)];
-          for (int s = 0; s < GroupSegments(group.kind); ++s) {
-            length[static_cast<size_t>(g)] += lines[static_cast<size_t>(group.segments[static_cast<size_t>(s)])].Length();
-          }
-        }
-        const auto keep = members.begin() + options_.max_index_queries;
-        std::partial_sort(members.begin(), keep, members.end(), [&](int a, int b) {
-          const double la = length[static_cast<size_t>(a)], lb = length[static_cast<size_t>(b)];
-          return la != lb ? la > lb : a < b;
-        });
-        members.erase(keep, members.end());
-      }
-      const size_t knn = static_cast<size_t>(std::min(options_.neighbours, index.vectors[k].rows));
-      const nanoflann::SearchParams search(0, static_cast<float>(options_.index_search_eps));
-      std::vector<uint32_t> found(knn);
-      std::vector<float> d2(knn);
-      std::vector<double> w(knn);
-      for (int g : members) {
-        const std::vector<float> query = IndexVector(groups[static_cast<size_t>(g)]);
-        nanoflann::KNNResultSet<float, uint32_t> neighbours(knn);
-        neighbours.init(found.data(), d2.data());
-        index.trees[k]->tree.findNeighbors(neighbours, query.data(), search);
-        const size_t count = neighbours.size();  // nearest first
-        double total = background;
-        std::map<int, double> per_model;
-        for (size_t j = 0; j < count; ++j) {
-          w[j] = std::exp(-d2[j] / (2 * kSigma * kSigma));
-          total += w[j];
-          per_model[index.entries[k][found[j]].model] += w[j];
-        }
-        for (size_t j = 0; j < count; ++j) {
-          const double p_model = per_model[index.entries[k][found[j]].model] / total;
-          // The neighbour's own weight orders the views within a model.
-          const double p = p_model * w[j] / std::max(w[0], 1e-300);
-          if (p < 1e-3) continue;
-          // Larger groups are more specific (paper §7.1): ties go to them.
-          hypotheses.push_back({p * (k == static_cast<int>(GroupKind::kChain4) ? 1.2 : 1.0), g, k,
-                                static_cast<int>(found[j])});
-        }
-      }
-    }
-    std::stable_sort(hypotheses.begin(), hypotheses.end(),
-                     [](const Hypothesis& a, const Hypothesis& b) { return a.probability > b.probability; });
-  }
+  // 3. indexing
+  const std::vector<Hypothesis> hypotheses = IndexHypotheses(index, groups, lines, options_);
   const auto t3 = Clock::now();
   if (trace != nullptr) {
     trace->lines = static_cast<int>(lines.size());
@@ -1356,29 +1577,9 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   }
 
   // Fixed world: the table top and the other fixed parts.
-  double table_top_z = 0;
-  std::vector<FixedPart> fixed_parts;
-  if (fixed_world != nullptr) {
-    for (const scene::SceneObject& o : fixed_world->objects) {
-      if (!o.fixed) continue;
-      if (o.name == "table") {
-        table_top_z = o.shape.WorldBounds(o.world_T_object).max.z();
-        continue;
-      }
-      for (const geometry::ShapePart& part : o.shape.parts()) {
-        const geometry::Pose3 world_T_part = o.world_T_object * part.shape_T_part;
-        FixedPart f;
-        f.name = o.name;
-        for (const Eigen::Vector3d& v : part.convex->vertices()) f.vertices.push_back(world_T_part * v);
-        for (const geometry::Face& face : part.convex->faces()) f.normals.push_back(world_T_part.Rotate(face.normal));
-        for (const geometry::Edge& e : part.convex->edges()) {
-          f.edge_dirs.push_back(world_T_part.Rotate(part.convex->vertices()[static_cast<size_t>(e.v1)] -
-                                                    part.convex->vertices()[static_cast<size_t>(e.v0)]).normalized());
-        }
-        if (f.vertices.size() > 0) fixed_parts.push_back(std::move(f));
-      }
-    }
-  }
+  const FixedWorld fixed = ReadFixedWorld(fixed_world);
+  const double table_top_z = fixed.table_top_z;
+  const std::vector<FixedPart>& fixed_parts = fixed.parts;
   const geometry::Pose3& world_T_camera = camera.world_T_camera();
   const FixedEdgeMap fixed_edges = ProjectFixedEdges(fixed_world, camera);
 
@@ -1430,37 +1631,6 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     }
     return false;
   };
-  // The rules after the matched share: the RMS of all matched segments against the final pose, or,
-  // when only the segments closest to each predicted edge are within the limit (a shadow or grain
-  // line runs beside an edge), stronger evidence: support along most of the predicted outline and no image
-  // edges running on past its corners (a wrong, smaller model fitted onto part of a real block);
-  // edge support; not part of a larger straight-edged thing (a cube fitted onto a bar, an upright
-  // block onto the dark cylinder: image edges run on past two or more of its corners for most of
-  // the edge's length while little of its own outline is supported). Then the step rule and the
-  // evidence score (below). The verdict: kCandidate or why not.
-  auto judge = [&](const PoseEvidence& e, double* rms_px) {
-    const bool trimmed_rms = e.rms_px > options_.max_reprojection_rms_px;
-    *rms_px = trimmed_rms ? std::min(e.rms_px, e.rms_closest_px) : e.rms_px;
-    Outcome rule = Outcome::kCandidate;
-    if (*rms_px > options_.max_reprojection_rms_px) {
-      rule = Outcome::kReprojection;
-    } else if (e.support_fraction < options_.min_score || e.coverage < options_.min_coverage ||
-               (trimmed_rms &&
-                (e.matched_fraction < kTrimmedMinMatchedFraction || e.coverage < kTrimmedMinCoverage ||
-                 e.continued_ends > kTrimmedMaxContinuedEnds)) ||
-               (e.long_continued_ends >= kPartMinContinuedEnds && e.coverage < kPartMaxCoverage)) {
-      rule = Outcome::kSupport;
-    }
-    // Outline along thin lines: where most of the supported outline is a thin line (wood grain
-    // inside a face, a scratch) and not a step in grey level between two surfaces, the pose is a
-    // wrong model laid onto a block's texture, whatever the rest of its evidence.
-    if (!StepRule(e, options_)) return Outcome::kSupport;
-    // The evidence score over all of it (EvidenceScore): required of a pose that passes the rules,
-    // and enough on its own when it is high.
-    const double score = EvidenceScore(e);
-    if (rule == Outcome::kCandidate) return score < options_.min_evidence_score ? Outcome::kEvidence : rule;
-    return score < options_.accept_evidence_score ? rule : Outcome::kCandidate;
-  };
   // Poses verification turned down for want of evidence, judged again after the selection where
   // accepted recognitions hide part of them (RecognizerOptions::occlusion_reverify).
   struct Rejected {
@@ -1488,7 +1658,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     if (implausible(model, fit.camera_T_object)) return reject(Outcome::kImplausible);
     PoseEvidence evidence =
         ComputeEvidence(model, camera, fit.camera_T_object, detection, &fixed_edges, options_, set);
-    Outcome outcome = judge(evidence, &fit.rms_px);
+    Outcome outcome = Judge(evidence, options_, &fit.rms_px);
     double rank_score = -1;  // set by the refit
     // A second chance, the edge-point refit (RecognizerOptions::edge_point_refit), for a pose whose
     // matched lines are off its predicted edges: often a grain line or a shadow beside an edge was
@@ -1517,7 +1687,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
         refit_evidence.rms_px = refit_evidence.rms_closest_px = polished->rms_px;
         double rms_px = 0;
         if (enough_matched(model, refit_set, polished->fit.camera_T_object) &&
-            judge(refit_evidence, &rms_px) == Outcome::kCandidate &&
+            Judge(refit_evidence, options_, &rms_px) == Outcome::kCandidate &&
             EvidenceScore(refit_evidence) >= options_.refit_accept_score) {
           fit = polished->fit;
           fit.rms_px = rms_px;
@@ -1549,30 +1719,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   // matches more of the outline without a larger residual.
   double support_ms = 0;  // proposing the support-plane hypotheses (their fits count in fit_verify)
   if (options_.support_hypotheses) {
-    std::vector<SupportPlane> planes;
-    {
-      SupportPlane table;
-      table.z_m = table_top_z;
-      table.min_xy = Eigen::Vector2d::Constant(-options_.work_area_radius_m);
-      table.max_xy = Eigen::Vector2d::Constant(options_.work_area_radius_m);
-      planes.push_back(table);
-    }
-    for (const FixedPart& part : fixed_parts) {
-      // A horizontal top face.
-      bool flat_top = false;
-      for (const Eigen::Vector3d& n : part.normals) flat_top = flat_top || n.z() > std::cos(1e-3);
-      if (!flat_top || part.vertices.empty()) continue;
-      SupportPlane top;
-      top.z_m = -1e9;
-      top.min_xy = Eigen::Vector2d::Constant(1e9);
-      top.max_xy = Eigen::Vector2d::Constant(-1e9);
-      for (const Eigen::Vector3d& v : part.vertices) {
-        top.z_m = std::max(top.z_m, v.z());
-        top.min_xy = top.min_xy.cwiseMin(v.head<2>());
-        top.max_xy = top.max_xy.cwiseMax(v.head<2>());
-      }
-      if (top.z_m > table_top_z + 1e-3) planes.push_back(top);
-    }
+    const std::vector<SupportPlane> planes = SupportPlanes(fixed, options_);
     const auto ts = Clock::now();
     const std::vector<ImageCorner> corners = FindCorners(lines, options_);
     const std::vector<SupportHypothesis> support_hypotheses =
@@ -1872,7 +2019,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       const PoseEvidence evidence =
           ComputeEvidence(model, camera, pose, detection, &fixed_edges, options_, set, &in_front);
       double rms_px = 0;
-      const Outcome verdict = judge(evidence, &rms_px);
+      const Outcome verdict = Judge(evidence, options_, &rms_px);
       const double score = EvidenceScore(evidence);
       if (verdict != Outcome::kCandidate || score < options_.occlusion_min_evidence_score) continue;
       Candidate c;
@@ -1922,109 +2069,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     r.covariance = b * c.fit.covariance_camera * b.transpose();
     result.objects.push_back(std::move(r));
   }
-  std::vector<bool> resting(result.objects.size(), false);
-  const Eigen::Vector3d camera_centre = world_T_camera.translation;
-  auto model_of = [&](const Recognition& r) -> const Model& {
-    return *std::find_if(models_.models.begin(), models_.models.end(), [&](const Model& m) { return m.name == r.model; });
-  };
-  for (size_t k = 0; k < result.objects.size(); ++k) {
-    Recognition& r = result.objects[k];
-    const Model& model = model_of(r);
-    auto lowest = [&]() { return LowestZ(model, r.world_T_object); };
-    if (lowest() - table_top_z > options_.table_snap_distance_m) continue;
-    // Level a nearly flat face (the object cannot rest on the table tilted by a few degrees).
-    const Eigen::Matrix3d rot = r.world_T_object.RotationMatrix();
-    int axis = 0;
-    for (int a = 1; a < 3; ++a) {
-      if (std::abs(rot(2, a)) > std::abs(rot(2, axis))) axis = a;
-    }
-    const Eigen::Vector3d up_axis = rot.col(axis) * (rot(2, axis) >= 0 ? 1.0 : -1.0);
-    const double tilt = std::acos(std::clamp(up_axis.z(), -1.0, 1.0));
-    if (tilt <= options_.table_snap_max_tilt_deg * M_PI / 180) {
-      if (tilt > 1e-9) {
-        const Eigen::Quaterniond level = Eigen::Quaterniond::FromTwoVectors(up_axis, Eigen::Vector3d::UnitZ());
-        r.world_T_object.rotation = (level * r.world_T_object.rotation).normalized();
-        char buf[96];
-        std::snprintf(buf, sizeof(buf), "levelled onto the table: turned %.2f deg", tilt * 180 / M_PI);
-        r.adjustments.push_back(buf);
-      }
-      // Along the camera ray (the monocular system's weak direction, §4.2-4.3).
-      const Eigen::Vector3d ray = (r.world_T_object.translation - camera_centre).normalized();
-      const double dz = table_top_z - lowest();
-      const Eigen::Vector3d move = std::abs(ray.z()) > 0.1 ? Eigen::Vector3d(ray * (dz / ray.z()))
-                                                           : Eigen::Vector3d(0, 0, dz);
-      r.world_T_object.translation += move;
-      resting[k] = true;
-      r.adjustments.push_back("rested on the table: moved " + Mm(move.norm()) +
-                              (std::abs(ray.z()) > 0.1 ? " along the camera ray" : " vertically"));
-    }
-  }
-  // Fitted again where it now rests (x, y and yaw on the table) to the image's edge points along its
-  // outline (PolishPose): lines beside an edge no longer pull it. The outline the other recognitions,
-  // where they now rest, hide (each box shrunk by 1 mm, as in the occlusion pass) is left out: there
-  // the front block's own edges would pull it.
-  if (options_.polish_pose) {
-    std::vector<std::optional<Occluder>> occluders;
-    for (const Recognition& o : result.objects) {
-      occluders.push_back(MakeOccluder(model_of(o), camera.camera_T_world() * o.world_T_object, kOccluderMarginM));
-    }
-    for (size_t k = 0; k < result.objects.size(); ++k) {
-      if (!resting[k]) continue;
-      Recognition& r = result.objects[k];
-      const Model& model = model_of(r);
-      std::vector<Occluder> others;
-      for (size_t j = 0; j < occluders.size(); ++j) {
-        if (j != k && occluders[j]) others.push_back(*occluders[j]);
-      }
-      const geometry::Pose3 camera_T_object = camera.camera_T_world() * r.world_T_object;
-      const PolishResult polished =
-          PolishPose(model, camera, camera_T_object, detection.edge_map, true, 3,
-                     [&](const Eigen::Vector3d& point) { return HiddenByAny(others, point); });
-      if (polished.ok) {
-        const geometry::Pose3 before = r.world_T_object;
-        r.world_T_object = world_T_camera * polished.fit.camera_T_object;
-        r.reprojection_rms_px = polished.rms_px;
-        char buf[128];
-        std::snprintf(buf, sizeof(buf),
-                      "fitted on the table to %d edge points: moved %.2f mm, turned %.2f deg",
-                      polished.points, 1000 * (r.world_T_object.translation - before.translation).norm(),
-                      r.world_T_object.rotation.angularDistance(before.rotation) * 180 / M_PI);
-        r.adjustments.push_back(buf);
-      }
-    }
-  }
-  // Interpenetrating recognitions: the less certain one moves by the smallest separating move
-  // (horizontal only when it rests on the table); then out of fixed objects.
-  for (int pass = 0; pass < 3; ++pass) {
-    bool moved = false;
-    for (size_t i = 0; i < result.objects.size(); ++i) {
-      for (size_t j = 0; j < result.objects.size(); ++j) {
-        if (i == j || result.objects[i].score > result.objects[j].score ||
-            (result.objects[i].score == result.objects[j].score && i < j)) {
-          continue;  // i moves when it scores lower
-        }
-        Recognition& ri = result.objects[i];
-        const Recognition& rj = result.objects[j];
-        const Penetration pen = BoxBoxPenetration(model_of(ri).box_size_m, ri.world_T_object, model_of(rj).box_size_m,
-                                                  rj.world_T_object, resting[i]);
-        if (pen.depth_m <= 1e-5) continue;
-        ri.world_T_object.translation += pen.direction * (pen.depth_m + 1e-5);
-        ri.adjustments.push_back("separated from the " + rj.model + " recognized at (" +
-                                 Mm(rj.world_T_object.translation.x()) + ", " + Mm(rj.world_T_object.translation.y()) +
-                                 "): moved " + Mm(pen.depth_m));
-        moved = true;
-      }
-      for (const FixedPart& part : fixed_parts) {
-        Recognition& ri = result.objects[i];
-        const Penetration pen = PartPenetration(model_of(ri), ri.world_T_object, part, resting[i]);
-        if (pen.depth_m <= 1e-5) continue;
-        ri.world_T_object.translation += pen.direction * (pen.depth_m + 1e-5);
-        ri.adjustments.push_back("pushed out of " + part.name + ": moved " + Mm(pen.depth_m));
-        moved = true;
-      }
-    }
-    if (!moved) break;
-  }
+  ApplyModelEditorRules(models_, camera, detection.edge_map, fixed, options_, &result.objects);
   const auto t5 = Clock::now();
   result.timing_ms = {{"lines", Ms(t0, t1)},
                       {"groups", Ms(t1, t2)},
