@@ -1543,8 +1543,549 @@ void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, con
 
 }  // namespace
 
+namespace {
+
+using Outcome = RecognitionTrace::Outcome;
+
+// Poses verification turned down for want of evidence, judged again after the selection where
+// accepted recognitions hide part of them (RecognizerOptions::occlusion_reverify).
+struct Rejected {
+  int model = 0;
+  FitResult fit;
+  int trace_index = -1;
+};
+
+// Steps 4-5b of one image's recognition: the hypotheses' fits and their verification, the selection
+// and the occlusion pass. They share what has been fitted (no initial pose twice), the image lines
+// the candidates claim, the candidates and the poses verification turned down.
+class RecognitionPass {
+ public:
+  RecognitionPass(const ModelLibrary& models, const RecognizerOptions& options, const Camera& camera,
+                  const LineDetection& detection, const FixedWorld& fixed, const FixedEdgeMap& fixed_edges,
+                  RecognitionTrace* trace)
+      : models_(models),
+        options_(options),
+        camera_(camera),
+        K_(camera.K()),
+        detection_(detection),
+        lines_(detection.lines),
+        fixed_(fixed),
+        fixed_edges_(fixed_edges),
+        trace_(trace),
+        claims_(detection.lines.size()),
+        match_angle_(options.match_angle_deg * M_PI / 180) {
+    for (const FixedPart& part : fixed.parts) fixed_extents_.push_back(ExtentOf(part.vertices));
+  }
+
+  // 4. Support-plane hypotheses (ranked by edge support): fitted on their plane first (x, y, yaw),
+  // where a predicted edge that picks up a shadow or grain line cannot tilt the block; then,
+  // optionally, in 6 DOF, kept when it matches more of the outline without a larger residual.
+  void FitSupportHypotheses(const std::vector<ImageCorner>& corners,
+                            const std::vector<SupportHypothesis>& hypotheses);
+  // 4. The index's most probable hypotheses, at most max_hypotheses fitted.
+  void FitIndexHypotheses(const RecognizerIndex& index, const std::vector<Group>& groups,
+                          const std::vector<Hypothesis>& hypotheses);
+  // Other models at each candidate's place (the candidates of the passes above only): where the
+  // block's own model was lost at its hypotheses or fit, a wrong model fitted onto it would otherwise
+  // stand unopposed in the selection.
+  void FitAlternatives();
+  // 5. consistency and non-maximum suppression: the best explained outline first, weighed by the
+  // evidence score (where a slab and a bar compete for one block, the longer outline alone favoured
+  // the slab: seeds 7-15 of the benchmark's renders 1559 -> 1562 found, 38 -> 34 false); a candidate
+  // that deeply interpenetrates an accepted one or claims the same image edges is the same object or
+  // a wrong one.
+  // Returns the accepted candidates' indices.
+  std::vector<size_t> Select();
+  // 5b. Blocks partly hidden by recognized ones (RecognizerOptions::occlusion_reverify): each pose
+  // verification turned down is judged again without the outline the accepted recognitions hide and
+  // without the image lines they claim (their edges end where a hidden block's do not). Those that
+  // pass, best ranked first, join the accepted ones unless they conflict with one.
+  void ReverifyOccluded(std::vector<size_t>* accepted_io);
+
+  const std::vector<Candidate>& candidates() const { return candidates_; }
+
+ private:
+  // Whether an initial pose like this one (1 cm, 8 degrees up to the model's symmetry) was fitted;
+  // remembers it.
+  bool AlreadyTried(int model_index, const geometry::Pose3& initial);
+  RecognitionTrace::Fitted* StartTrace(int model_index, int kind, const geometry::Pose3& initial);
+  // The matched share's rule on what the image can show (RecognizerOptions::matched_share_in_image);
+  // the evidence keeps the share of the whole visible edges, the feature its score was fitted on.
+  bool EnoughMatched(const Model& model, const EdgeMatchSet& matched,
+                     const geometry::Pose3& camera_T_object) const;
+  // Culling (§7.1): outside the work site, under the table, inside a fixed object.
+  bool Implausible(const Model& model, const geometry::Pose3& camera_T_object) const;
+  // Verification and culling of a fitted pose; a candidate when it passes, else remembered as rejected.
+  void Verify(int model_index, FitResult fit, RecognitionTrace::Fitted* traced);
+  // Culling what floats (§7.1: poses that cannot be real): each recognition rests on the table, or
+  // stands on fixed objects' tops or other recognitions' tops (StandsOnSupports: its centre over where
+  // it touches them; checked until nothing changes). Applied to all candidates before the non-maximum
+  // suppression too, so that a floating wrong candidate cannot suppress the right one and then be
+  // culled itself. Returns the members of `set` (candidate indices) that are supported.
+  std::vector<size_t> SupportedSubset(const std::vector<size_t>& set) const;
+  // Two poses that interpenetrate this deeply are the same object or one of them is wrong.
+  bool Interpenetrate(int model_c, const geometry::Pose3& camera_T_c, const Candidate& a) const;
+  // A candidate conflicts with an accepted one when they interpenetrate, share a third of its
+  // matched lines, or it hides outline of the accepted one where the image shows a step
+  // (HiddenSupportedSamples).
+  bool Conflicting(const Candidate& c, const Candidate& a) const;
+
+  const ModelLibrary& models_;
+  const RecognizerOptions& options_;
+  const Camera& camera_;
+  const Eigen::Matrix3d K_;
+  const LineDetection& detection_;
+  const std::vector<ImageLine>& lines_;
+  const FixedWorld& fixed_;
+  const FixedEdgeMap& fixed_edges_;
+  RecognitionTrace* trace_;
+  std::vector<geometry::Aabb> fixed_extents_;  // of each fixed part
+  SegmentClaims claims_;
+  const double match_angle_;                            // rad
+  std::vector<std::pair<int, geometry::Pose3>> tried_;  // initial poses already fitted
+  std::vector<Candidate> candidates_;
+  std::vector<double> rank_;  // of each candidate in the selection
+  std::vector<Rejected> rejected_;
+};
+
+bool RecognitionPass::AlreadyTried(int model_index, const geometry::Pose3& initial) {
+  const Model& model = models_.models[static_cast<size_t>(model_index)];
+  for (const auto& [m, pose] : tried_) {
+    if (m == model_index && (pose.translation - initial.translation).norm() < 0.01 &&
+        SymmetricRotationAngle(model, pose, initial) < 8 * M_PI / 180) {
+      return true;
+    }
+  }
+  tried_.push_back({model_index, initial});
+  return false;
+}
+
+RecognitionTrace::Fitted* RecognitionPass::StartTrace(int model_index, int kind,
+                                                      const geometry::Pose3& initial) {
+  if (trace_ == nullptr) return nullptr;
+  trace_->fitted.push_back({model_index, kind, initial, initial, {}, Outcome::kFitFailed, false});
+  return &trace_->fitted.back();
+}
+
+bool RecognitionPass::EnoughMatched(const Model& model, const EdgeMatchSet& matched,
+                                    const geometry::Pose3& camera_T_object) const {
+  EdgeMatchSet in_image;  // the two figures the rule needs, not the matches themselves
+  in_image.matched_fraction = matched.matched_fraction;
+  in_image.visible_length_px = matched.visible_length_px;
+  if (options_.matched_share_in_image) {
+    MatchedWithinImage(model, camera_, camera_T_object, in_image, options_.matched_share_min_in_image);
+  }
+  return in_image.matched_fraction >= options_.min_matched_edge_fraction;
+}
+
+bool RecognitionPass::Implausible(const Model& model, const geometry::Pose3& camera_T_object) const {
+  const geometry::Pose3 world_T_object = camera_.world_T_camera() * camera_T_object;
+  if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m) return true;
+  if (LowestZ(model, world_T_object) < fixed_.table_top_z - options_.below_table_tolerance_m) return true;
+  for (const FixedPart& part : fixed_.parts) {
+    if (PartPenetration(model, world_T_object, part, false).depth_m >
+        std::max(0.005, 0.2 * model.box_size_m.minCoeff())) {
+      return true;
+    }
+  }
+  return false;
+}
+
+void RecognitionPass::Verify(int model_index, FitResult fit, RecognitionTrace::Fitted* traced) {
+  const Model& model = models_.models[static_cast<size_t>(model_index)];
+  auto reject = [&](Outcome outcome) {
+    if (traced != nullptr) traced->outcome = outcome;
+    if (options_.occlusion_reverify && outcome != Outcome::kImplausible && outcome != Outcome::kCandidate) {
+      rejected_.push_back(
+          {model_index, fit, traced != nullptr ? static_cast<int>(trace_->fitted.size()) - 1 : -1});
+    }
+  };
+  EdgeMatchSet set =
+      MatchEdges(model, K_, fit.camera_T_object, lines_, options_.match_distance_px, match_angle_);
+  if (!EnoughMatched(model, set, fit.camera_T_object)) {
+    reject(Outcome::kMatchedFraction);
+    return;
+  }
+  if (Implausible(model, fit.camera_T_object)) return reject(Outcome::kImplausible);
+  PoseEvidence evidence =
+      ComputeEvidence(model, camera_, fit.camera_T_object, detection_, &fixed_edges_, options_, set);
+  Outcome outcome = Judge(evidence, options_, &fit.rms_px);
+  double rank_score = -1;  // set by the refit
+  // A second chance, the edge-point refit (RecognizerOptions::edge_point_refit), for a pose whose
+  // matched lines are off its predicted edges: often a grain line or a shadow beside an edge was
+  // matched with it. The image's own edge points along the outline have no such neighbours. A pose
+  // that fits them closely while resting on the table is judged again on them, its RMS theirs, and
+  // accepted only with a strong evidence score. Refitted only when it could reach that score at all
+  // (its score with no residual) and its outline is supported well enough otherwise. The step rule
+  // is judged on the refitted pose only: on the line fit's pose, a pixel or two off the edges, its
+  // samples can straddle the step (render seeds 7-31: 4 more blocks found, no more false).
+  if (outcome != Outcome::kCandidate && options_.edge_point_refit &&
+      evidence.rms_px > options_.max_reprojection_rms_px &&
+      evidence.coverage >= options_.refit_min_coverage && evidence.support_fraction >= options_.min_score) {
+    PoseEvidence best = evidence;
+    best.rms_px = best.rms_closest_px = 0;
+    const std::optional<PolishResult> polished =
+        EvidenceScore(best) >= options_.refit_accept_score
+            ? RefitOnEdgePoints(model, camera_, fit.camera_T_object, detection_.edge_map, fixed_.table_top_z,
+                                options_)
+            : std::nullopt;
+    if (polished && !Implausible(model, polished->fit.camera_T_object)) {
+      EdgeMatchSet refit_set = MatchEdges(model, K_, polished->fit.camera_T_object, lines_,
+                                          options_.match_distance_px, match_angle_);
+      PoseEvidence refit_evidence = ComputeEvidence(model, camera_, polished->fit.camera_T_object, detection_,
+                                                    &fixed_edges_, options_, refit_set);
+      const double lines_score = EvidenceScore(refit_evidence);
+      refit_evidence.rms_px = refit_evidence.rms_closest_px = polished->rms_px;
+      double rms_px = 0;
+      if (EnoughMatched(model, refit_set, polished->fit.camera_T_object) &&
+          Judge(refit_evidence, options_, &rms_px) == Outcome::kCandidate &&
+          EvidenceScore(refit_evidence) >= options_.refit_accept_score) {
+        fit = polished->fit;
+        fit.rms_px = rms_px;
+        set = std::move(refit_set);
+        evidence = refit_evidence;
+        rank_score = lines_score;
+        outcome = Outcome::kCandidate;
+        if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
+      }
+    }
+  }
+  if (outcome != Outcome::kCandidate) return reject(outcome);
+  if (traced != nullptr) traced->outcome = Outcome::kCandidate;
+  Candidate c;
+  c.trace_index = traced != nullptr ? static_cast<int>(trace_->fitted.size()) - 1 : -1;
+  c.model = model_index;
+  c.camera_T_object = fit.camera_T_object;
+  c.fit = fit;
+  c.matches = set;
+  c.evidence = evidence;
+  c.rms_px = fit.rms_px;
+  c.rank_score = rank_score >= 0 ? rank_score : EvidenceScore(evidence);
+  for (int seg : set.segments) claims_.Claim(seg, model_index);
+  candidates_.push_back(std::move(c));
+}
+
+void RecognitionPass::FitSupportHypotheses(const std::vector<ImageCorner>& corners,
+                                           const std::vector<SupportHypothesis>& hypotheses) {
+  const geometry::Pose3& camera_T_world = camera_.camera_T_world();
+  for (const SupportHypothesis& h : hypotheses) {
+    const ImageCorner& corner = corners[static_cast<size_t>(h.corner)];
+    if (claims_.BothClaimed(
+            corner.segments[0], corner.segments[1],
+            options_.skip_corners_claimed_by_any_model ? SegmentClaims::kAnyModel : h.model)) {
+      continue;
+    }
+    const geometry::Pose3 initial = camera_T_world * h.world_T_object;
+    if (AlreadyTried(h.model, initial)) continue;
+    const Model& model = models_.models[static_cast<size_t>(h.model)];
+    RecognitionTrace::Fitted* traced = StartTrace(h.model, kSupportKind, initial);
+    const HypothesisFit fitted = FitSupportHypothesis(model, K_, camera_T_world, initial, lines_, options_);
+    if (traced != nullptr)
+      traced->rounds.insert(traced->rounds.end(), fitted.rounds.begin(), fitted.rounds.end());
+    const FitResult& fit = fitted.fit;
+    const bool failed = fitted.failed;
+    if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
+    if (failed) continue;
+    Verify(h.model, fit, traced);
+  }
+}
+
+void RecognitionPass::FitIndexHypotheses(const RecognizerIndex& index, const std::vector<Group>& groups,
+                                         const std::vector<Hypothesis>& hypotheses) {
+  int fits = 0;
+  for (const Hypothesis& h : hypotheses) {
+    if (fits >= options_.max_hypotheses) break;
+    const Group& group = groups[static_cast<size_t>(h.group)];
+    const IndexEntry& entry = index.entries[h.kind][static_cast<size_t>(h.entry)];
+    const Model& model = models_.models[entry.model];
+    const int nseg = GroupSegments(group.kind);
+    bool all_claimed = true;
+    for (int s = 0; s < nseg; ++s) {
+      all_claimed =
+          all_claimed && claims_.Claimed(group.segments[static_cast<size_t>(s)], SegmentClaims::kAnyModel);
+    }
+    if (all_claimed) continue;
+    const geometry::Pose3 initial = InitialPose(index, model, entry, group, K_);
+    if (!(initial.translation.z() > 0.05) || !initial.translation.allFinite()) continue;
+    if (AlreadyTried(entry.model, initial)) continue;
+    ++fits;
+    RecognitionTrace::Fitted* traced = StartTrace(entry.model, h.kind, initial);
+
+    // The hypothesis' own correspondences first, then predicted edges' matches (Lowe 1991).
+    std::vector<LineMatch> matches;
+    for (int s = 0; s < nseg; ++s) {
+      int va, vb;
+      if (group.kind == GroupKind::kFork3) {
+        va = entry.vertices[0], vb = entry.vertices[s + 1];
+      } else {
+        va = entry.vertices[s], vb = entry.vertices[s + 1];
+      }
+      int edge = -1;
+      for (int e = 0; e < 12; ++e) {
+        if ((kBoxEdges[e][0] == va && kBoxEdges[e][1] == vb) || (kBoxEdges[e][0] == vb && kBoxEdges[e][1] == va)) edge = e;
+      }
+      TEACHSIM_CHECK(edge >= 0);
+      const ImageLine& l = lines_[static_cast<size_t>(group.segments[static_cast<size_t>(s)])];
+      matches.push_back({edge, l.a, l.b});
+    }
+    const HypothesisFit fitted = FitIndexHypothesis(model, K_, initial, matches, lines_, options_);
+    if (traced != nullptr) traced->rounds.insert(traced->rounds.end(), fitted.rounds.begin(), fitted.rounds.end());
+    const FitResult& fit = fitted.fit;
+    const bool failed = fitted.failed;
+    if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
+    if (failed) continue;
+    Verify(entry.model, fit, traced);
+  }
+}
+
+void RecognitionPass::FitAlternatives() {
+  for (size_t c = 0, first_pass = candidates_.size(); c < first_pass && options_.max_alternative_fits > 0;
+       ++c) {
+    const int candidate_model = candidates_[c].model;
+    const geometry::Pose3 world_T_candidate = camera_.world_T_camera() * candidates_[c].camera_T_object;
+    int fitted = 0;
+    for (const SupportHypothesis& h :
+         AlternativeHypotheses(models_, camera_, detection_, candidate_model, world_T_candidate, options_)) {
+      if (fitted >= options_.max_alternative_fits) break;
+      const geometry::Pose3 initial = camera_.camera_T_world() * h.world_T_object;
+      if (AlreadyTried(h.model, initial)) continue;
+      ++fitted;
+      const Model& model = models_.models[static_cast<size_t>(h.model)];
+      RecognitionTrace::Fitted* traced = StartTrace(h.model, kAlternativeKind, initial);
+      const HypothesisFit fit =
+          FitSupportHypothesis(model, K_, camera_.camera_T_world(), initial, lines_, options_);
+      if (traced != nullptr) {
+        traced->rounds.insert(traced->rounds.end(), fit.rounds.begin(), fit.rounds.end());
+        traced->camera_T_object = fit.fit.camera_T_object;
+      }
+      if (!fit.failed) Verify(h.model, fit.fit, traced);
+    }
+  }
+}
+
+std::vector<size_t> RecognitionPass::SupportedSubset(const std::vector<size_t>& set) const {
+  std::vector<geometry::Aabb> extents;
+  for (size_t i : set) {
+    const Candidate& c = candidates_[i];
+    extents.push_back(ExtentOf(BoxWorldVertices(models_.models[static_cast<size_t>(c.model)],
+                                                camera_.world_T_camera() * c.camera_T_object)));
+  }
+  std::vector<bool> supported(set.size(), false);
+  std::vector<geometry::Aabb> supports;
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (size_t k = 0; k < set.size(); ++k) {
+      if (supported[k]) continue;
+      bool ok = std::abs(extents[k].min.z() - fixed_.table_top_z) <= options_.support_tolerance_m;
+      if (!ok) {
+        supports = fixed_extents_;
+        for (size_t j = 0; j < set.size(); ++j) {
+          if (supported[j] && j != k) supports.push_back(extents[j]);
+        }
+        ok = StandsOnSupports(extents[k], supports, options_.support_tolerance_m,
+                              options_.support_centre_slack_m);
+      }
+      if (ok) supported[k] = changed = true;
+    }
+  }
+  std::vector<size_t> kept;
+  for (size_t k = 0; k < set.size(); ++k) {
+    if (supported[k]) kept.push_back(set[k]);
+  }
+  return kept;
+}
+
+bool RecognitionPass::Interpenetrate(int model_c, const geometry::Pose3& camera_T_c,
+                                     const Candidate& a) const {
+  const Model& mc = models_.models[static_cast<size_t>(model_c)];
+  const Model& ma = models_.models[static_cast<size_t>(a.model)];
+  const Penetration pen =
+      BoxBoxPenetration(mc.box_size_m, camera_.world_T_camera() * camera_T_c, ma.box_size_m,
+                        camera_.world_T_camera() * a.camera_T_object, false);
+  return pen.depth_m > 0.25 * std::min(mc.box_size_m.minCoeff(), ma.box_size_m.minCoeff());
+}
+
+bool RecognitionPass::Conflicting(const Candidate& c, const Candidate& a) const {
+  const Model& mc = models_.models[static_cast<size_t>(c.model)];
+  const Model& ma = models_.models[static_cast<size_t>(a.model)];
+  if (Interpenetrate(c.model, c.camera_T_object, a)) return true;
+  std::set<int> sa(a.matches.segments.begin(), a.matches.segments.end());
+  int shared = 0;
+  for (int s : c.matches.segments) shared += sa.count(s) ? 1 : 0;
+  if (shared * 3 > static_cast<int>(c.matches.segments.size())) return true;
+  return HiddenSupportedSamples(ma, a.camera_T_object, mc, c.camera_T_object, camera_, detection_.edge_map,
+                                options_) >= kMaxHiddenSupportedSamples;
+}
+
+std::vector<size_t> RecognitionPass::Select() {
+  std::vector<size_t> order(candidates_.size());
+  rank_.assign(candidates_.size(), 0);
+  for (size_t i = 0; i < order.size(); ++i) {
+    order[i] = i;
+    rank_[i] = NetSupportPx(candidates_[i].evidence) * candidates_[i].rank_score;
+  }
+  order = SupportedSubset(order);
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return rank_[a] > rank_[b]; });
+  std::vector<size_t> accepted;
+  for (size_t i : order) {
+    const Candidate& c = candidates_[i];
+    std::vector<size_t> conflicts;  // positions in accepted
+    for (size_t k = 0; k < accepted.size() && conflicts.size() < 2; ++k) {
+      if (Conflicting(c, candidates_[accepted[k]])) conflicts.push_back(k);
+    }
+    if (conflicts.empty()) {
+      accepted.push_back(i);
+      continue;
+    }
+    // One rival at the same place: the candidate replaces it when what it predicts alone is in the
+    // image and what the rival predicts alone is not (OwnOutlineBalance): a wrong model that
+    // outranked the right one by the outline both share (a slab over a bar, a cube on a bar's end).
+    if (conflicts.size() == 1 && options_.conflict_balance_margin > 0) {
+      const Candidate& a = candidates_[accepted[conflicts[0]]];
+      const Model& mc = models_.models[static_cast<size_t>(c.model)];
+      const Model& ma = models_.models[static_cast<size_t>(a.model)];
+      // What else is accepted explains its own edges: those count for neither. The first of the
+      // others is the one compared with: the rival for the candidate, then the candidate for it.
+      std::vector<std::pair<const Model*, geometry::Pose3>> others = {{&ma, a.camera_T_object}};
+      for (size_t k = 0; k < accepted.size(); ++k) {
+        if (k == conflicts[0]) continue;
+        const Candidate& o = candidates_[accepted[k]];
+        others.push_back({&models_.models[static_cast<size_t>(o.model)], o.camera_T_object});
+      }
+      PairwiseSide own{OwnOutlineBalance(mc, c.camera_T_object, others, camera_, detection_.edge_map,
+                                         fixed_edges_, options_),
+                       rank_[i], VisibleOutlineInImage(mc, camera_, c.camera_T_object)};
+      others.front() = {&mc, c.camera_T_object};
+      PairwiseSide rival{OwnOutlineBalance(ma, a.camera_T_object, others, camera_, detection_.edge_map,
+                                           fixed_edges_, options_),
+                         rank_[accepted[conflicts[0]]],
+                         VisibleOutlineInImage(ma, camera_, a.camera_T_object)};
+      if (ReplacesRival(own, rival, options_)) accepted[conflicts[0]] = i;
+    }
+  }
+  return SupportedSubset(accepted);
+}
+
+void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io) {
+  std::vector<size_t>& accepted = *accepted_io;
+  if (!options_.occlusion_reverify || accepted.empty() || rejected_.empty()) return;
+  // Which occluders can hide part of a pose: those whose boxes' images (pin-hole projections: a
+  // ray through both boxes maps to one point in both) overlap and that come nearer the camera.
+  struct ImageExtent {
+    Eigen::Vector2d lo, hi;
+    double near_z = 0, far_z = 0;
+    bool valid = false;  // no vertex behind or at the camera
+  };
+  auto image_extent = [&](const Model& model, const geometry::Pose3& camera_T_object) {
+    ImageExtent e;
+    e.lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
+    e.hi = -e.lo;
+    e.near_z = std::numeric_limits<double>::infinity();
+    e.far_z = -e.near_z;
+    for (int v = 0; v < 8; ++v) {
+      const Eigen::Vector3d p = camera_T_object * BoxVertex(model.box_size_m, v);
+      if (p.z() <= 1e-3) return e;
+      const Eigen::Vector2d px = (K_ * p).hnormalized();
+      e.lo = e.lo.cwiseMin(px);
+      e.hi = e.hi.cwiseMax(px);
+      e.near_z = std::min(e.near_z, p.z());
+      e.far_z = std::max(e.far_z, p.z());
+    }
+    e.valid = true;
+    return e;
+  };
+  std::vector<Occluder> occluders;
+  std::vector<ImageExtent> occluder_extents;  // of each occluder
+  std::vector<bool> claimed(lines_.size(), false);
+  for (size_t i : accepted) {
+    const Candidate& a = candidates_[i];
+    const Model& model = models_.models[static_cast<size_t>(a.model)];
+    if (auto o = MakeOccluder(model, a.camera_T_object, kOccluderMarginM)) {
+      occluders.push_back(*o);
+      occluder_extents.push_back(image_extent(model, a.camera_T_object));
+    }
+    for (int seg : a.matches.segments) claimed[static_cast<size_t>(seg)] = true;
+  }
+  std::vector<ImageLine> free_lines;  // the lines no accepted recognition claims
+  std::vector<int> free_index;        // each one's index in `lines`
+  for (size_t l = 0; l < lines_.size(); ++l) {
+    if (claimed[l]) continue;
+    free_lines.push_back(lines_[l]);
+    free_index.push_back(static_cast<int>(l));
+  }
+  std::vector<Occluder> in_front;
+  std::vector<size_t> passed;
+  for (const Rejected& r : rejected_) {
+    const Model& model = models_.models[static_cast<size_t>(r.model)];
+    const geometry::Pose3& pose = r.fit.camera_T_object;
+    const ImageExtent extent = image_extent(model, pose);
+    in_front.clear();
+    for (size_t k = 0; k < occluders.size(); ++k) {
+      const ImageExtent& o = occluder_extents[k];
+      if (!extent.valid || !o.valid ||
+          (o.near_z < extent.far_z && (o.lo.array() <= extent.hi.array()).all() &&
+           (extent.lo.array() <= o.hi.array()).all())) {
+        in_front.push_back(occluders[k]);
+      }
+    }
+    if (in_front.empty()) continue;
+    // One that interpenetrates an accepted recognition cannot join them (most turned-down poses
+    // are other fits of an accepted block): not judged again.
+    bool deep = false;
+    for (size_t k = 0; k < accepted.size() && !deep; ++k) {
+      deep = Interpenetrate(r.model, pose, candidates_[accepted[k]]);
+    }
+    if (deep) continue;
+    const double hidden = HiddenOutlineShare(model, camera_, pose, in_front);
+    if (hidden < options_.occlusion_min_hidden_share || 1 - hidden < options_.occlusion_min_shown_share) {
+      continue;
+    }
+    if (Implausible(model, pose)) continue;
+    EdgeMatchSet set = MatchEdges(model, K_, pose, free_lines, options_.match_distance_px, match_angle_);
+    for (int& seg : set.segments) seg = free_index[static_cast<size_t>(seg)];
+    // The matched share of the outline in view (the hidden share as the samples inside the image give it).
+    const double covered = set.matched_fraction * set.visible_length_px;
+    set.visible_length_px *= 1 - hidden;
+    set.matched_fraction = set.visible_length_px > 0 ? std::min(1.0, covered / set.visible_length_px) : 0;
+    if (!EnoughMatched(model, set, pose)) continue;
+    const PoseEvidence evidence =
+        ComputeEvidence(model, camera_, pose, detection_, &fixed_edges_, options_, set, &in_front);
+    double rms_px = 0;
+    const Outcome verdict = Judge(evidence, options_, &rms_px);
+    const double score = EvidenceScore(evidence);
+    if (verdict != Outcome::kCandidate || score < options_.occlusion_min_evidence_score) continue;
+    Candidate c;
+    c.trace_index = r.trace_index;
+    c.model = r.model;
+    c.camera_T_object = pose;
+    c.fit = r.fit;
+    c.fit.rms_px = rms_px;
+    c.matches = std::move(set);
+    c.evidence = evidence;
+    c.rms_px = rms_px;
+    c.rank_score = score;
+    passed.push_back(candidates_.size());
+    rank_.push_back(NetSupportPx(evidence) * c.rank_score);
+    candidates_.push_back(std::move(c));
+  }
+  std::stable_sort(passed.begin(), passed.end(), [&](size_t a, size_t b) { return rank_[a] > rank_[b]; });
+  for (size_t i : passed) {
+    bool conflict = false;
+    for (size_t k = 0; k < accepted.size() && !conflict; ++k) {
+      conflict = Conflicting(candidates_[i], candidates_[accepted[k]]);
+    }
+    if (conflict) continue;
+    std::vector<size_t> with = accepted;
+    with.push_back(i);
+    if (SupportedSubset(with).size() == with.size()) accepted = std::move(with);
+  }
+}
+
+}  // namespace
+
 Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, const Camera& camera,
-                                                const scene::Scene* fixed_world, RecognitionTrace* trace) const {
+                                                const scene::Scene* fixed_world,
+                                                RecognitionTrace* trace) const {
   if (image_gray8.empty() || image_gray8.type() != CV_8UC1) {
     return Status::InvalidInput("Recognize: the image must be 8-bit monochrome (CV_8UC1)");
   }
@@ -1555,7 +2096,6 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   }
   RecognitionResult result;
   const RecognizerIndex& index = *index_;
-  const Eigen::Matrix3d K = camera.K();
   const auto t0 = Clock::now();
 
   // 1. lines
@@ -1576,147 +2116,13 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     trace->hypotheses = static_cast<int>(hypotheses.size());
   }
 
-  // Fixed world: the table top and the other fixed parts.
+  // The fixed world: the table top and the other fixed parts.
   const FixedWorld fixed = ReadFixedWorld(fixed_world);
-  const double table_top_z = fixed.table_top_z;
-  const std::vector<FixedPart>& fixed_parts = fixed.parts;
-  const geometry::Pose3& world_T_camera = camera.world_T_camera();
   const FixedEdgeMap fixed_edges = ProjectFixedEdges(fixed_world, camera);
 
-  // 4-5. pose fitting and verification: the support-plane hypotheses (ranked by edge support),
-  // then the index's most probable hypotheses.
-  std::vector<Candidate> candidates;
-  SegmentClaims claims(lines.size());
-  std::vector<std::pair<int, geometry::Pose3>> tried;  // initial poses already fitted
-  const double match_angle = options_.match_angle_deg * M_PI / 180;
-  using Outcome = RecognitionTrace::Outcome;
-  auto already_tried = [&](int model_index, const geometry::Pose3& initial) {
-    const Model& model = models_.models[static_cast<size_t>(model_index)];
-    for (const auto& [m, pose] : tried) {
-      if (m == model_index && (pose.translation - initial.translation).norm() < 0.01 &&
-          SymmetricRotationAngle(model, pose, initial) < 8 * M_PI / 180) {
-        return true;
-      }
-    }
-    tried.push_back({model_index, initial});
-    return false;
-  };
-  auto start_trace = [&](int model_index, int kind, const geometry::Pose3& initial) -> RecognitionTrace::Fitted* {
-    if (trace == nullptr) return nullptr;
-    trace->fitted.push_back({model_index, kind, initial, initial, {}, Outcome::kFitFailed, false});
-    return &trace->fitted.back();
-  };
-  // The matched share's rule on what the image can show (RecognizerOptions::matched_share_in_image);
-  // the evidence keeps the share of the whole visible edges, the feature its score was fitted on.
-  auto enough_matched = [&](const Model& model, const EdgeMatchSet& matched,
-                            const geometry::Pose3& camera_T_object) {
-    EdgeMatchSet in_image;  // the two figures the rule needs, not the matches themselves
-    in_image.matched_fraction = matched.matched_fraction;
-    in_image.visible_length_px = matched.visible_length_px;
-    if (options_.matched_share_in_image) {
-      MatchedWithinImage(model, camera, camera_T_object, in_image, options_.matched_share_min_in_image);
-    }
-    return in_image.matched_fraction >= options_.min_matched_edge_fraction;
-  };
-  // Culling (§7.1): outside the work site, under the table, inside a fixed object.
-  auto implausible = [&](const Model& model, const geometry::Pose3& camera_T_object) {
-    const geometry::Pose3 world_T_object = world_T_camera * camera_T_object;
-    if (world_T_object.translation.head<2>().norm() > options_.work_area_radius_m) return true;
-    if (LowestZ(model, world_T_object) < table_top_z - options_.below_table_tolerance_m) return true;
-    for (const FixedPart& part : fixed_parts) {
-      if (PartPenetration(model, world_T_object, part, false).depth_m >
-          std::max(0.005, 0.2 * model.box_size_m.minCoeff())) {
-        return true;
-      }
-    }
-    return false;
-  };
-  // Poses verification turned down for want of evidence, judged again after the selection where
-  // accepted recognitions hide part of them (RecognizerOptions::occlusion_reverify).
-  struct Rejected {
-    int model = 0;
-    FitResult fit;
-    int trace_index = -1;
-  };
-  std::vector<Rejected> rejected;
-  // Verification and culling of a fitted pose; a candidate when it passes.
-  auto verify = [&](int model_index, FitResult fit, RecognitionTrace::Fitted* traced) {
-    const Model& model = models_.models[static_cast<size_t>(model_index)];
-    auto reject = [&](Outcome outcome) {
-      if (traced != nullptr) traced->outcome = outcome;
-      if (options_.occlusion_reverify && outcome != Outcome::kImplausible && outcome != Outcome::kCandidate) {
-        rejected.push_back(
-            {model_index, fit, traced != nullptr ? static_cast<int>(trace->fitted.size()) - 1 : -1});
-      }
-    };
-    EdgeMatchSet set =
-        MatchEdges(model, K, fit.camera_T_object, lines, options_.match_distance_px, match_angle);
-    if (!enough_matched(model, set, fit.camera_T_object)) {
-      reject(Outcome::kMatchedFraction);
-      return;
-    }
-    if (implausible(model, fit.camera_T_object)) return reject(Outcome::kImplausible);
-    PoseEvidence evidence =
-        ComputeEvidence(model, camera, fit.camera_T_object, detection, &fixed_edges, options_, set);
-    Outcome outcome = Judge(evidence, options_, &fit.rms_px);
-    double rank_score = -1;  // set by the refit
-    // A second chance, the edge-point refit (RecognizerOptions::edge_point_refit), for a pose whose
-    // matched lines are off its predicted edges: often a grain line or a shadow beside an edge was
-    // matched with it. The image's own edge points along the outline have no such neighbours. A pose
-    // that fits them closely while resting on the table is judged again on them, its RMS theirs, and
-    // accepted only with a strong evidence score. Refitted only when it could reach that score at all
-    // (its score with no residual) and its outline is supported well enough otherwise. The step rule
-    // is judged on the refitted pose only: on the line fit's pose, a pixel or two off the edges, its
-    // samples can straddle the step (render seeds 7-31: 4 more blocks found, no more false).
-    if (outcome != Outcome::kCandidate && options_.edge_point_refit &&
-        evidence.rms_px > options_.max_reprojection_rms_px &&
-        evidence.coverage >= options_.refit_min_coverage && evidence.support_fraction >= options_.min_score) {
-      PoseEvidence best = evidence;
-      best.rms_px = best.rms_closest_px = 0;
-      const std::optional<PolishResult> polished =
-          EvidenceScore(best) >= options_.refit_accept_score
-              ? RefitOnEdgePoints(model, camera, fit.camera_T_object, detection.edge_map, table_top_z,
-                                  options_)
-              : std::nullopt;
-      if (polished && !implausible(model, polished->fit.camera_T_object)) {
-        EdgeMatchSet refit_set = MatchEdges(model, K, polished->fit.camera_T_object, lines,
-                                            options_.match_distance_px, match_angle);
-        PoseEvidence refit_evidence = ComputeEvidence(model, camera, polished->fit.camera_T_object, detection,
-                                                      &fixed_edges, options_, refit_set);
-        const double lines_score = EvidenceScore(refit_evidence);
-        refit_evidence.rms_px = refit_evidence.rms_closest_px = polished->rms_px;
-        double rms_px = 0;
-        if (enough_matched(model, refit_set, polished->fit.camera_T_object) &&
-            Judge(refit_evidence, options_, &rms_px) == Outcome::kCandidate &&
-            EvidenceScore(refit_evidence) >= options_.refit_accept_score) {
-          fit = polished->fit;
-          fit.rms_px = rms_px;
-          set = std::move(refit_set);
-          evidence = refit_evidence;
-          rank_score = lines_score;
-          outcome = Outcome::kCandidate;
-          if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
-        }
-      }
-    }
-    if (outcome != Outcome::kCandidate) return reject(outcome);
-    if (traced != nullptr) traced->outcome = Outcome::kCandidate;
-    Candidate c;
-    c.trace_index = traced != nullptr ? static_cast<int>(trace->fitted.size()) - 1 : -1;
-    c.model = model_index;
-    c.camera_T_object = fit.camera_T_object;
-    c.fit = fit;
-    c.matches = set;
-    c.evidence = evidence;
-    c.rms_px = fit.rms_px;
-    c.rank_score = rank_score >= 0 ? rank_score : EvidenceScore(evidence);
-    for (int seg : set.segments) claims.Claim(seg, model_index);
-    candidates.push_back(std::move(c));
-  };
-
-  // Support-plane hypotheses: fitted on their plane first (x, y, yaw), where a predicted edge that
-  // picks up a shadow or grain line cannot tilt the block; then, optionally, in 6 DOF, kept when it
-  // matches more of the outline without a larger residual.
+  // 4. pose fitting and verification: the support-plane hypotheses, the index's most probable
+  // hypotheses, then other models at each candidate's place.
+  RecognitionPass pass(models_, options_, camera, detection, fixed, fixed_edges, trace);
   double support_ms = 0;  // proposing the support-plane hypotheses (their fits count in fit_verify)
   if (options_.support_hypotheses) {
     const std::vector<SupportPlane> planes = SupportPlanes(fixed, options_);
@@ -1729,331 +2135,22 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
       trace->corners = static_cast<int>(corners.size());
       trace->support_hypotheses = static_cast<int>(support_hypotheses.size());
     }
-    const geometry::Pose3& camera_T_world = camera.camera_T_world();
-    for (const SupportHypothesis& h : support_hypotheses) {
-      const ImageCorner& corner = corners[static_cast<size_t>(h.corner)];
-      if (claims.BothClaimed(corner.segments[0], corner.segments[1],
-                             options_.skip_corners_claimed_by_any_model ? SegmentClaims::kAnyModel : h.model)) {
-        continue;
-      }
-      const geometry::Pose3 initial = camera_T_world * h.world_T_object;
-      if (already_tried(h.model, initial)) continue;
-      const Model& model = models_.models[static_cast<size_t>(h.model)];
-      RecognitionTrace::Fitted* traced = start_trace(h.model, kSupportKind, initial);
-      const HypothesisFit fitted = FitSupportHypothesis(model, K, camera_T_world, initial, lines, options_);
-      if (traced != nullptr) traced->rounds.insert(traced->rounds.end(), fitted.rounds.begin(), fitted.rounds.end());
-      const FitResult& fit = fitted.fit;
-      const bool failed = fitted.failed;
-      if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
-      if (failed) continue;
-      verify(h.model, fit, traced);
-    }
+    pass.FitSupportHypotheses(corners, support_hypotheses);
   }
-
-  int fits = 0;
-  for (const Hypothesis& h : hypotheses) {
-    if (fits >= options_.max_hypotheses) break;
-    const Group& group = groups[static_cast<size_t>(h.group)];
-    const IndexEntry& entry = index.entries[h.kind][static_cast<size_t>(h.entry)];
-    const Model& model = models_.models[entry.model];
-    const int nseg = GroupSegments(group.kind);
-    bool all_claimed = true;
-    for (int s = 0; s < nseg; ++s) {
-      all_claimed = all_claimed && claims.Claimed(group.segments[static_cast<size_t>(s)], SegmentClaims::kAnyModel);
-    }
-    if (all_claimed) continue;
-    const geometry::Pose3 initial = InitialPose(index, model, entry, group, K);
-    if (!(initial.translation.z() > 0.05) || !initial.translation.allFinite()) continue;
-    if (already_tried(entry.model, initial)) continue;
-    ++fits;
-    RecognitionTrace::Fitted* traced = start_trace(entry.model, h.kind, initial);
-
-    // The hypothesis' own correspondences first, then predicted edges' matches (Lowe 1991).
-    std::vector<LineMatch> matches;
-    for (int s = 0; s < nseg; ++s) {
-      int va, vb;
-      if (group.kind == GroupKind::kFork3) {
-        va = entry.vertices[0], vb = entry.vertices[s + 1];
-      } else {
-        va = entry.vertices[s], vb = entry.vertices[s + 1];
-      }
-      int edge = -1;
-      for (int e = 0; e < 12; ++e) {
-        if ((kBoxEdges[e][0] == va && kBoxEdges[e][1] == vb) || (kBoxEdges[e][0] == vb && kBoxEdges[e][1] == va)) edge = e;
-      }
-      TEACHSIM_CHECK(edge >= 0);
-      const ImageLine& l = lines[static_cast<size_t>(group.segments[static_cast<size_t>(s)])];
-      matches.push_back({edge, l.a, l.b});
-    }
-    const HypothesisFit fitted = FitIndexHypothesis(model, K, initial, matches, lines, options_);
-    if (traced != nullptr) traced->rounds.insert(traced->rounds.end(), fitted.rounds.begin(), fitted.rounds.end());
-    const FitResult& fit = fitted.fit;
-    const bool failed = fitted.failed;
-    if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
-    if (failed) continue;
-    verify(entry.model, fit, traced);
-  }
-
-  // Other models at each candidate's place (the candidates of the passes above only): where the
-  // block's own model was lost at its hypotheses or fit, a wrong model fitted onto it would otherwise
-  // stand unopposed in the selection.
-  for (size_t c = 0, first_pass = candidates.size(); c < first_pass && options_.max_alternative_fits > 0;
-       ++c) {
-    const int candidate_model = candidates[c].model;
-    const geometry::Pose3 world_T_candidate = world_T_camera * candidates[c].camera_T_object;
-    int fitted = 0;
-    for (const SupportHypothesis& h :
-         AlternativeHypotheses(models_, camera, detection, candidate_model, world_T_candidate, options_)) {
-      if (fitted >= options_.max_alternative_fits) break;
-      const geometry::Pose3 initial = camera.camera_T_world() * h.world_T_object;
-      if (already_tried(h.model, initial)) continue;
-      ++fitted;
-      const Model& model = models_.models[static_cast<size_t>(h.model)];
-      RecognitionTrace::Fitted* traced = start_trace(h.model, kAlternativeKind, initial);
-      const HypothesisFit fit =
-          FitSupportHypothesis(model, K, camera.camera_T_world(), initial, lines, options_);
-      if (traced != nullptr) {
-        traced->rounds.insert(traced->rounds.end(), fit.rounds.begin(), fit.rounds.end());
-        traced->camera_T_object = fit.fit.camera_T_object;
-      }
-      if (!fit.failed) verify(h.model, fit.fit, traced);
-    }
-  }
+  pass.FitIndexHypotheses(index, groups, hypotheses);
+  pass.FitAlternatives();
   const auto t4 = Clock::now();
 
-  // Culling what floats (§7.1: poses that cannot be real): each recognition rests on the table, or
-  // stands on fixed objects' tops or other recognitions' tops (StandsOnSupports: its centre over where
-  // it touches them; checked until nothing changes). Applied to all candidates before the non-maximum
-  // suppression too, so that a floating wrong candidate cannot suppress the right one and then be
-  // culled itself.
-  std::vector<geometry::Aabb> fixed_extents;
-  for (const FixedPart& part : fixed_parts) fixed_extents.push_back(ExtentOf(part.vertices));
-  auto supported_subset = [&](const std::vector<size_t>& set) {
-    std::vector<geometry::Aabb> extents;
-    for (size_t i : set) {
-      const Candidate& c = candidates[i];
-      extents.push_back(ExtentOf(BoxWorldVertices(models_.models[static_cast<size_t>(c.model)],
-                                                  world_T_camera * c.camera_T_object)));
-    }
-    std::vector<bool> supported(set.size(), false);
-    std::vector<geometry::Aabb> supports;
-    for (bool changed = true; changed;) {
-      changed = false;
-      for (size_t k = 0; k < set.size(); ++k) {
-        if (supported[k]) continue;
-        bool ok = std::abs(extents[k].min.z() - table_top_z) <= options_.support_tolerance_m;
-        if (!ok) {
-          supports = fixed_extents;
-          for (size_t j = 0; j < set.size(); ++j) {
-            if (supported[j] && j != k) supports.push_back(extents[j]);
-          }
-          ok = StandsOnSupports(extents[k], supports, options_.support_tolerance_m,
-                                options_.support_centre_slack_m);
-        }
-        if (ok) supported[k] = changed = true;
-      }
-    }
-    std::vector<size_t> kept;
-    for (size_t k = 0; k < set.size(); ++k) {
-      if (supported[k]) kept.push_back(set[k]);
-    }
-    return kept;
-  };
-
-  // 5. consistency and non-maximum suppression: the best explained outline first, weighed by the
-  // evidence score (where a slab and a bar compete for one block, the longer outline alone favoured
-  // the slab: seeds 7-15 of the benchmark's renders 1559 -> 1562 found, 38 -> 34 false); a candidate
-  // that deeply interpenetrates an accepted one or claims the same image edges is the same object or
-  // a wrong one.
-  std::vector<size_t> order(candidates.size());
-  std::vector<double> rank(candidates.size());
-  for (size_t i = 0; i < order.size(); ++i) {
-    order[i] = i;
-    rank[i] = NetSupportPx(candidates[i].evidence) * candidates[i].rank_score;
-  }
-  order = supported_subset(order);
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return rank[a] > rank[b]; });
-  // Two poses that interpenetrate this deeply are the same object or one of them is wrong.
-  auto interpenetrate = [&](int model_c, const geometry::Pose3& camera_T_c, const Candidate& a) {
-    const Model& mc = models_.models[static_cast<size_t>(model_c)];
-    const Model& ma = models_.models[static_cast<size_t>(a.model)];
-    const Penetration pen = BoxBoxPenetration(mc.box_size_m, world_T_camera * camera_T_c, ma.box_size_m,
-                                              world_T_camera * a.camera_T_object, false);
-    return pen.depth_m > 0.25 * std::min(mc.box_size_m.minCoeff(), ma.box_size_m.minCoeff());
-  };
-  auto conflicting = [&](const Candidate& c, const Candidate& a) {
-    const Model& mc = models_.models[static_cast<size_t>(c.model)];
-    const Model& ma = models_.models[static_cast<size_t>(a.model)];
-    if (interpenetrate(c.model, c.camera_T_object, a)) return true;
-    std::set<int> sa(a.matches.segments.begin(), a.matches.segments.end());
-    int shared = 0;
-    for (int s : c.matches.segments) shared += sa.count(s) ? 1 : 0;
-    if (shared * 3 > static_cast<int>(c.matches.segments.size())) return true;
-    return HiddenSupportedSamples(ma, a.camera_T_object, mc, c.camera_T_object, camera, detection.edge_map,
-                                  options_) >= kMaxHiddenSupportedSamples;
-  };
-  std::vector<size_t> accepted;
-  for (size_t i : order) {
-    const Candidate& c = candidates[i];
-    std::vector<size_t> conflicts;  // positions in accepted
-    for (size_t k = 0; k < accepted.size() && conflicts.size() < 2; ++k) {
-      if (conflicting(c, candidates[accepted[k]])) conflicts.push_back(k);
-    }
-    if (conflicts.empty()) {
-      accepted.push_back(i);
-      continue;
-    }
-    // One rival at the same place: the candidate replaces it when what it predicts alone is in the
-    // image and what the rival predicts alone is not (OwnOutlineBalance): a wrong model that
-    // outranked the right one by the outline both share (a slab over a bar, a cube on a bar's end).
-    if (conflicts.size() == 1 && options_.conflict_balance_margin > 0) {
-      const Candidate& a = candidates[accepted[conflicts[0]]];
-      const Model& mc = models_.models[static_cast<size_t>(c.model)];
-      const Model& ma = models_.models[static_cast<size_t>(a.model)];
-      // What else is accepted explains its own edges: those count for neither. The first of the
-      // others is the one compared with: the rival for the candidate, then the candidate for it.
-      std::vector<std::pair<const Model*, geometry::Pose3>> others = {{&ma, a.camera_T_object}};
-      for (size_t k = 0; k < accepted.size(); ++k) {
-        if (k == conflicts[0]) continue;
-        const Candidate& o = candidates[accepted[k]];
-        others.push_back({&models_.models[static_cast<size_t>(o.model)], o.camera_T_object});
-      }
-      PairwiseSide own{
-          OwnOutlineBalance(mc, c.camera_T_object, others, camera, detection.edge_map, fixed_edges, options_),
-          rank[i], VisibleOutlineInImage(mc, camera, c.camera_T_object)};
-      others.front() = {&mc, c.camera_T_object};
-      PairwiseSide rival{
-          OwnOutlineBalance(ma, a.camera_T_object, others, camera, detection.edge_map, fixed_edges, options_),
-          rank[accepted[conflicts[0]]], VisibleOutlineInImage(ma, camera, a.camera_T_object)};
-      if (ReplacesRival(own, rival, options_)) accepted[conflicts[0]] = i;
-    }
-  }
-
-  accepted = supported_subset(accepted);
+  // 5. consistency and non-maximum suppression; 5b. blocks partly hidden by the accepted ones.
+  std::vector<size_t> accepted = pass.Select();
   const auto t_occlusion = Clock::now();
-
-  // 5b. Blocks partly hidden by recognized ones (RecognizerOptions::occlusion_reverify): each pose
-  // verification turned down is judged again without the outline the accepted recognitions hide and
-  // without the image lines they claim (their edges end where a hidden block's do not). Those that
-  // pass, best ranked first, join the accepted ones unless they conflict with one.
-  if (options_.occlusion_reverify && !accepted.empty() && !rejected.empty()) {
-    // Which occluders can hide part of a pose: those whose boxes' images (pin-hole projections: a
-    // ray through both boxes maps to one point in both) overlap and that come nearer the camera.
-    struct ImageExtent {
-      Eigen::Vector2d lo, hi;
-      double near_z = 0, far_z = 0;
-      bool valid = false;  // no vertex behind or at the camera
-    };
-    auto image_extent = [&](const Model& model, const geometry::Pose3& camera_T_object) {
-      ImageExtent e;
-      e.lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::infinity());
-      e.hi = -e.lo;
-      e.near_z = std::numeric_limits<double>::infinity();
-      e.far_z = -e.near_z;
-      for (int v = 0; v < 8; ++v) {
-        const Eigen::Vector3d p = camera_T_object * BoxVertex(model.box_size_m, v);
-        if (p.z() <= 1e-3) return e;
-        const Eigen::Vector2d px = (K * p).hnormalized();
-        e.lo = e.lo.cwiseMin(px);
-        e.hi = e.hi.cwiseMax(px);
-        e.near_z = std::min(e.near_z, p.z());
-        e.far_z = std::max(e.far_z, p.z());
-      }
-      e.valid = true;
-      return e;
-    };
-    std::vector<Occluder> occluders;
-    std::vector<ImageExtent> occluder_extents;  // of each occluder
-    std::vector<bool> claimed(lines.size(), false);
-    for (size_t i : accepted) {
-      const Candidate& a = candidates[i];
-      const Model& model = models_.models[static_cast<size_t>(a.model)];
-      if (auto o = MakeOccluder(model, a.camera_T_object, kOccluderMarginM)) {
-        occluders.push_back(*o);
-        occluder_extents.push_back(image_extent(model, a.camera_T_object));
-      }
-      for (int seg : a.matches.segments) claimed[static_cast<size_t>(seg)] = true;
-    }
-    std::vector<ImageLine> free_lines;  // the lines no accepted recognition claims
-    std::vector<int> free_index;        // each one's index in `lines`
-    for (size_t l = 0; l < lines.size(); ++l) {
-      if (claimed[l]) continue;
-      free_lines.push_back(lines[l]);
-      free_index.push_back(static_cast<int>(l));
-    }
-    std::vector<Occluder> in_front;
-    std::vector<size_t> passed;
-    for (const Rejected& r : rejected) {
-      const Model& model = models_.models[static_cast<size_t>(r.model)];
-      const geometry::Pose3& pose = r.fit.camera_T_object;
-      const ImageExtent extent = image_extent(model, pose);
-      in_front.clear();
-      for (size_t k = 0; k < occluders.size(); ++k) {
-        const ImageExtent& o = occluder_extents[k];
-        if (!extent.valid || !o.valid ||
-            (o.near_z < extent.far_z && (o.lo.array() <= extent.hi.array()).all() &&
-             (extent.lo.array() <= o.hi.array()).all())) {
-          in_front.push_back(occluders[k]);
-        }
-      }
-      if (in_front.empty()) continue;
-      // One that interpenetrates an accepted recognition cannot join them (most turned-down poses
-      // are other fits of an accepted block): not judged again.
-      bool deep = false;
-      for (size_t k = 0; k < accepted.size() && !deep; ++k) {
-        deep = interpenetrate(r.model, pose, candidates[accepted[k]]);
-      }
-      if (deep) continue;
-      const double hidden = HiddenOutlineShare(model, camera, pose, in_front);
-      if (hidden < options_.occlusion_min_hidden_share || 1 - hidden < options_.occlusion_min_shown_share) {
-        continue;
-      }
-      if (implausible(model, pose)) continue;
-      EdgeMatchSet set = MatchEdges(model, K, pose, free_lines, options_.match_distance_px, match_angle);
-      for (int& seg : set.segments) seg = free_index[static_cast<size_t>(seg)];
-      // The matched share of the outline in view (the hidden share as the samples inside the image give it).
-      const double covered = set.matched_fraction * set.visible_length_px;
-      set.visible_length_px *= 1 - hidden;
-      set.matched_fraction = set.visible_length_px > 0 ? std::min(1.0, covered / set.visible_length_px) : 0;
-      if (!enough_matched(model, set, pose)) continue;
-      const PoseEvidence evidence =
-          ComputeEvidence(model, camera, pose, detection, &fixed_edges, options_, set, &in_front);
-      double rms_px = 0;
-      const Outcome verdict = Judge(evidence, options_, &rms_px);
-      const double score = EvidenceScore(evidence);
-      if (verdict != Outcome::kCandidate || score < options_.occlusion_min_evidence_score) continue;
-      Candidate c;
-      c.trace_index = r.trace_index;
-      c.model = r.model;
-      c.camera_T_object = pose;
-      c.fit = r.fit;
-      c.fit.rms_px = rms_px;
-      c.matches = std::move(set);
-      c.evidence = evidence;
-      c.rms_px = rms_px;
-      c.rank_score = score;
-      passed.push_back(candidates.size());
-      rank.push_back(NetSupportPx(evidence) * c.rank_score);
-      candidates.push_back(std::move(c));
-    }
-    std::stable_sort(passed.begin(), passed.end(), [&](size_t a, size_t b) { return rank[a] > rank[b]; });
-    for (size_t i : passed) {
-      bool conflict = false;
-      for (size_t k = 0; k < accepted.size() && !conflict; ++k) {
-        conflict = conflicting(candidates[i], candidates[accepted[k]]);
-      }
-      if (conflict) continue;
-      std::vector<size_t> with = accepted;
-      with.push_back(i);
-      if (supported_subset(with).size() == with.size()) accepted = std::move(with);
-    }
-  }
-
+  pass.ReverifyOccluded(&accepted);
   const double occlusion_ms = Ms(t_occlusion, Clock::now());
 
-  // 6. the model editor's rules (§4.3).
+  // 6. the accepted candidates as recognitions in the world frame, then the model editor's rules (§4.3).
+  const geometry::Pose3& world_T_camera = camera.world_T_camera();
   for (size_t i : accepted) {
-    const Candidate& c = candidates[i];
+    const Candidate& c = pass.candidates()[i];
     if (trace != nullptr && c.trace_index >= 0) trace->fitted[static_cast<size_t>(c.trace_index)].accepted = true;
     const Model& model = models_.models[static_cast<size_t>(c.model)];
     Recognition r;
