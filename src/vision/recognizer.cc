@@ -1585,7 +1585,7 @@ class RecognitionPass {
   // 4. The index's most probable hypotheses, at most max_hypotheses fitted.
   void FitIndexHypotheses(const RecognizerIndex& index, const std::vector<Group>& groups,
                           const std::vector<Hypothesis>& hypotheses);
-  // Other models at each candidate's place (the candidates of the passes above only): where the
+  // 4. Other models at each candidate's place (the candidates of the passes above only): where the
   // block's own model was lost at its hypotheses or fit, a wrong model fitted onto it would otherwise
   // stand unopposed in the selection.
   void FitAlternatives();
@@ -1593,8 +1593,7 @@ class RecognitionPass {
   // evidence score (where a slab and a bar compete for one block, the longer outline alone favoured
   // the slab: seeds 7-15 of the benchmark's renders 1559 -> 1562 found, 38 -> 34 false); a candidate
   // that deeply interpenetrates an accepted one or claims the same image edges is the same object or
-  // a wrong one.
-  // Returns the accepted candidates' indices.
+  // a wrong one. Returns the accepted candidates' indices.
   std::vector<size_t> Select();
   // 5b. Blocks partly hidden by recognized ones (RecognizerOptions::occlusion_reverify): each pose
   // verification turned down is judged again without the outline the accepted recognitions hide and
@@ -1608,6 +1607,7 @@ class RecognitionPass {
   // Whether an initial pose like this one (1 cm, 8 degrees up to the model's symmetry) was fitted;
   // remembers it.
   bool AlreadyTried(int model_index, const geometry::Pose3& initial);
+  // The trace's entry for a fit from `initial` (none when no trace was asked for).
   RecognitionTrace::Fitted* StartTrace(int model_index, int kind, const geometry::Pose3& initial);
   // The matched share's rule on what the image can show (RecognizerOptions::matched_share_in_image);
   // the evidence keeps the share of the whole visible edges, the feature its score was fitted on.
@@ -1615,7 +1615,8 @@ class RecognitionPass {
                      const geometry::Pose3& camera_T_object) const;
   // Culling (§7.1): outside the work site, under the table, inside a fixed object.
   bool Implausible(const Model& model, const geometry::Pose3& camera_T_object) const;
-  // Verification and culling of a fitted pose; a candidate when it passes, else remembered as rejected.
+  // Verification and culling of a fitted pose: a candidate when it passes; turned down for want of
+  // evidence, kept for ReverifyOccluded.
   void Verify(int model_index, FitResult fit, RecognitionTrace::Fitted* traced);
   // Culling what floats (§7.1: poses that cannot be real): each recognition rests on the table, or
   // stands on fixed objects' tops or other recognitions' tops (StandsOnSupports: its centre over where
