@@ -1618,6 +1618,11 @@ class RecognitionPass {
   // Verification and culling of a fitted pose: a candidate when it passes; turned down for want of
   // evidence, kept for ReverifyOccluded.
   void Verify(int model_index, FitResult fit, RecognitionTrace::Fitted* traced);
+  // A hypothesis' fit: its rounds and final pose into its trace entry; verified unless it failed.
+  void VerifyFitted(int model_index, const HypothesisFit& fitted, RecognitionTrace::Fitted* traced);
+  // A hypothesis of a block resting on a plane (support-plane or alternative; `kind` for the trace):
+  // fitted on the plane (FitSupportHypothesis), then verified.
+  void FitOnSupport(int model_index, int kind, const geometry::Pose3& initial);
   // Culling what floats (§7.1: poses that cannot be real): each recognition rests on the table, or
   // stands on fixed objects' tops or other recognitions' tops (StandsOnSupports: its centre over where
   // it touches them; checked until nothing changes). Applied to all candidates before the non-maximum
@@ -1766,6 +1771,22 @@ void RecognitionPass::Verify(int model_index, FitResult fit, RecognitionTrace::F
   candidates_.push_back(std::move(c));
 }
 
+void RecognitionPass::VerifyFitted(int model_index, const HypothesisFit& fitted,
+                                   RecognitionTrace::Fitted* traced) {
+  if (traced != nullptr) {
+    traced->rounds.insert(traced->rounds.end(), fitted.rounds.begin(), fitted.rounds.end());
+    traced->camera_T_object = fitted.fit.camera_T_object;
+  }
+  if (!fitted.failed) Verify(model_index, fitted.fit, traced);
+}
+
+void RecognitionPass::FitOnSupport(int model_index, int kind, const geometry::Pose3& initial) {
+  RecognitionTrace::Fitted* traced = StartTrace(model_index, kind, initial);
+  const Model& model = models_.models[static_cast<size_t>(model_index)];
+  VerifyFitted(model_index,
+               FitSupportHypothesis(model, K_, camera_.camera_T_world(), initial, lines_, options_), traced);
+}
+
 void RecognitionPass::FitSupportHypotheses(const std::vector<ImageCorner>& corners,
                                            const std::vector<SupportHypothesis>& hypotheses) {
   const geometry::Pose3& camera_T_world = camera_.camera_T_world();
@@ -1778,16 +1799,7 @@ void RecognitionPass::FitSupportHypotheses(const std::vector<ImageCorner>& corne
     }
     const geometry::Pose3 initial = camera_T_world * h.world_T_object;
     if (AlreadyTried(h.model, initial)) continue;
-    const Model& model = models_.models[static_cast<size_t>(h.model)];
-    RecognitionTrace::Fitted* traced = StartTrace(h.model, kSupportKind, initial);
-    const HypothesisFit fitted = FitSupportHypothesis(model, K_, camera_T_world, initial, lines_, options_);
-    if (traced != nullptr)
-      traced->rounds.insert(traced->rounds.end(), fitted.rounds.begin(), fitted.rounds.end());
-    const FitResult& fit = fitted.fit;
-    const bool failed = fitted.failed;
-    if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
-    if (failed) continue;
-    Verify(h.model, fit, traced);
+    FitOnSupport(h.model, kSupportKind, initial);
   }
 }
 
@@ -1829,13 +1841,7 @@ void RecognitionPass::FitIndexHypotheses(const RecognizerIndex& index, const std
       const ImageLine& l = lines_[static_cast<size_t>(group.segments[static_cast<size_t>(s)])];
       matches.push_back({edge, l.a, l.b});
     }
-    const HypothesisFit fitted = FitIndexHypothesis(model, K_, initial, matches, lines_, options_);
-    if (traced != nullptr) traced->rounds.insert(traced->rounds.end(), fitted.rounds.begin(), fitted.rounds.end());
-    const FitResult& fit = fitted.fit;
-    const bool failed = fitted.failed;
-    if (traced != nullptr) traced->camera_T_object = fit.camera_T_object;
-    if (failed) continue;
-    Verify(entry.model, fit, traced);
+    VerifyFitted(entry.model, FitIndexHypothesis(model, K_, initial, matches, lines_, options_), traced);
   }
 }
 
@@ -1851,15 +1857,7 @@ void RecognitionPass::FitAlternatives() {
       const geometry::Pose3 initial = camera_.camera_T_world() * h.world_T_object;
       if (AlreadyTried(h.model, initial)) continue;
       ++fitted;
-      const Model& model = models_.models[static_cast<size_t>(h.model)];
-      RecognitionTrace::Fitted* traced = StartTrace(h.model, kAlternativeKind, initial);
-      const HypothesisFit fit =
-          FitSupportHypothesis(model, K_, camera_.camera_T_world(), initial, lines_, options_);
-      if (traced != nullptr) {
-        traced->rounds.insert(traced->rounds.end(), fit.rounds.begin(), fit.rounds.end());
-        traced->camera_T_object = fit.fit.camera_T_object;
-      }
-      if (!fit.failed) Verify(h.model, fit.fit, traced);
+      FitOnSupport(h.model, kAlternativeKind, initial);
     }
   }
 }
