@@ -63,9 +63,13 @@ struct RecognizerOptions {
                                              // per image (FLANN 6.8, exact 3)
   int max_index_queries = 150;               // groups per kind looked up in the index, longest first (images with wood
                                              // grain give up to 1000; on seeds 7-13 150 found as many, +2, p90 time -10 ms)
-  int max_hypotheses = 60;                   // index hypotheses tried per image, most probable first (120 before the
-                                             // support-plane source; with it, 60 found as many of the benchmark's
-                                             // rendered blocks, 78 against 76 of 193, in 30 % less time)
+  int max_hypotheses = 10;                   // index hypotheses tried per image, most probable first, after the
+                                             // support-plane ones (120 before that source, 60 until session 23).
+                                             // Render seeds 7-18, 60/40/30/20/10/5: found >= 0.7 visible 2181/
+                                             // 2180/2181/2181/2181/2180, 0.4-0.7 48/48/48/47/47/47, false 23/22/
+                                             // 20/20/19/19; 10 held on seeds 19-31 (2335 -> 2338, 71 -> 71, false
+                                             // 36 -> 32), fresh 32-41 (1791 -> 1789, 47 -> 47, 28 -> 27); the
+                                             // fit-and-verify stage 40 % faster
   // --- support-plane hypotheses (a second source beside the index, paper §7.1; blocks at rest, §4.3)
   bool support_hypotheses = true;            // off: the index alone proposes poses (the ablation)
   // Fitted per image, best edge support first. 40 until session 17; 80 on render seeds 7-31: found
