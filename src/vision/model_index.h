@@ -15,7 +15,6 @@
 #include "teachsim/base/status.h"
 #include "teachsim/geometry/pose.h"
 #include "teachsim/vision/recognition_stages.h"
-#include "teachsim/vision/recognizer.h"
 
 namespace teachsim::vision {
 
