@@ -69,7 +69,7 @@ struct RecognizerOptions {
                                              // 2180/2181/2181/2181/2180, 0.4-0.7 48/48/48/47/47/47, false 23/22/
                                              // 20/20/19/19; 10 held on seeds 19-31 (2335 -> 2338, 71 -> 71, false
                                              // 36 -> 32), fresh 32-41 (1791 -> 1789, 47 -> 47, 28 -> 27); the
-                                             // fit-and-verify stage 40 % faster
+                                             // fit-and-verify stage about a third faster
   // --- support-plane hypotheses (a second source beside the index, paper §7.1; blocks at rest, §4.3)
   bool support_hypotheses = true;            // off: the index alone proposes poses (the ablation)
   // Fitted per image, best edge support first. 40 until session 17; 80 on render seeds 7-31: found
