@@ -199,11 +199,8 @@ Result<Recognizer> Recognizer::Create(const ModelLibrary& models, const Recogniz
   Recognizer r;
   r.models_ = models;
   r.options_ = options;
-  bool loaded = false;
-  TEACHSIM_ASSIGN_OR_RETURN(std::shared_ptr<RecognizerIndex> index,
-                            internal::LoadOrBuildIndex(models, options, cache_dir, &loaded));
-  r.loaded_from_cache_ = loaded;
-  r.index_ = index;
+  TEACHSIM_ASSIGN_OR_RETURN(r.index_,
+                            internal::LoadOrBuildIndex(models, options, cache_dir, &r.loaded_from_cache_));
   return r;
 }
 
