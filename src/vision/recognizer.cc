@@ -1,6 +1,6 @@
 // The recognizer (issue 7; paper §4.1-4.3, §7.1): hypotheses from the model-view index (Beis & Lowe;
 // model_index.cc) and, in parallel, from image corners of blocks resting on a support plane
-// (support_hypotheses.cc), Lowe's pose fit, verification, and the model editor's rules.
+// (support_hypotheses.cc), Lowe's pose fit, verification; the model editor's rules are in model_editor.cc.
 #include "teachsim/vision/recognizer.h"
 
 #include <Eigen/Geometry>
@@ -14,6 +14,7 @@
 #include <optional>
 #include <set>
 
+#include "model_editor.h"
 #include "model_index.h"
 #include "teachsim/base/json.h"
 #include "teachsim/vision/evaluate.h"
@@ -21,9 +22,21 @@
 
 namespace teachsim::vision {
 
+using internal::ApplyModelEditorRules;
+using internal::BoxWorldVertices;
+using internal::FixedPart;
+using internal::FixedWorld;
+using internal::HiddenByAny;
+using internal::Hides;
 using internal::Hypothesis;
 using internal::IndexHypotheses;
 using internal::InitialPose;
+using internal::kOccluderMarginM;
+using internal::LowestZ;
+using internal::MakeOccluder;
+using internal::Occluder;
+using internal::PartPenetration;
+using internal::ReadFixedWorld;
 
 // ---------------------------------------------------------------- options and models
 
@@ -351,50 +364,6 @@ std::vector<LineMatch> ClosestMatchesPerEdge(const Model& model, const Eigen::Ma
   return out;
 }
 
-// An accepted recognition as an occluder of others (the occlusion pass, the editor's polish): its box
-// shrunk by this much, so that edges on its own outline and edges touching it are not hidden.
-constexpr double kOccluderMarginM = 0.001;
-
-// A box that hides what lies behind it, shrunk by a margin so that edges on its own outline and
-// edges touching it are not hidden.
-struct Occluder {
-  geometry::Pose3 box_T_camera;
-  Eigen::Vector3d half;  // half the shrunk box's size, m
-};
-
-std::optional<Occluder> MakeOccluder(const Model& model, const geometry::Pose3& camera_T_box,
-                                     double margin_m) {
-  const Eigen::Vector3d half = 0.5 * model.box_size_m - Eigen::Vector3d::Constant(margin_m);
-  if ((half.array() <= 0).any()) return std::nullopt;
-  return Occluder{camera_T_box.Inverse(), half};
-}
-
-// Whether the segment from the camera to a point (camera frame) passes through the occluder's box
-// (slab test, in the box's frame).
-bool Hides(const Occluder& o, const Eigen::Vector3d& point_in_camera) {
-  const Eigen::Vector3d& origin = o.box_T_camera.translation;
-  const Eigen::Vector3d d = o.box_T_camera * point_in_camera - origin;
-  double t0 = 0, t1 = 1;
-  for (int a = 0; a < 3 && t0 <= t1; ++a) {
-    if (std::abs(d[a]) < 1e-12) {
-      if (std::abs(origin[a]) > o.half[a]) return false;
-      continue;
-    }
-    double ta = (-o.half[a] - origin[a]) / d[a], tb = (o.half[a] - origin[a]) / d[a];
-    if (ta > tb) std::swap(ta, tb);
-    t0 = std::max(t0, ta);
-    t1 = std::min(t1, tb);
-  }
-  return t0 <= t1;
-}
-
-bool HiddenByAny(const std::vector<Occluder>& occluders, const Eigen::Vector3d& point_in_camera) {
-  for (const Occluder& o : occluders) {
-    if (Hides(o, point_in_camera)) return true;
-  }
-  return false;
-}
-
 // Occlusion consistency: the samples of `behind`'s predicted edges that show an image edge with a
 // step in grey level across it (as the step rule asks of supported outline) but that `front`, were it
 // there, would hide (the ray from the camera to the edge point passes through front's box, shrunk by
@@ -526,25 +495,6 @@ struct Candidate {
       0;  // the evidence score the selection ranks by (of a refitted pose: with its lines' RMS)
 };
 
-std::vector<Eigen::Vector3d> BoxWorldVertices(const Model& model, const geometry::Pose3& world_T_object) {
-  std::vector<Eigen::Vector3d> v;
-  for (int i = 0; i < 8; ++i) v.push_back(world_T_object * BoxVertex(model.box_size_m, i));
-  return v;
-}
-
-// A fixed object's convex part in the world, for the separating-axis test.
-struct FixedPart {
-  std::string name;
-  std::vector<Eigen::Vector3d> vertices;
-  std::vector<Eigen::Vector3d> normals, edge_dirs;
-};
-
-double LowestZ(const Model& model, const geometry::Pose3& world_T_object) {
-  double z = 1e9;
-  for (const Eigen::Vector3d& v : BoxWorldVertices(model, world_T_object)) z = std::min(z, v.z());
-  return z;
-}
-
 // Whether a pose rests on the table: its lowest point within distance_m of the table top and one of
 // its faces within tilt_deg of level (the model editor's tolerances: table_snap_distance_m and
 // table_snap_max_tilt_deg).
@@ -554,26 +504,6 @@ bool RestsOnTable(const Model& model, const geometry::Pose3& world_T_object, dou
   const double up = rotation.row(2).cwiseAbs().maxCoeff();  // cosine of the most vertical axis' tilt
   return std::abs(LowestZ(model, world_T_object) - table_top_z) <= distance_m &&
          up >= std::cos(tilt_deg * M_PI / 180);
-}
-
-Penetration PartPenetration(const Model& model, const geometry::Pose3& world_T_object, const FixedPart& part,
-                            bool horizontal_only) {
-  std::vector<Eigen::Vector3d> axes = part.normals;
-  const Eigen::Matrix3d r = world_T_object.RotationMatrix();
-  for (int i = 0; i < 3; ++i) {
-    axes.push_back(r.col(i));
-    for (const Eigen::Vector3d& d : part.edge_dirs) axes.push_back(r.col(i).cross(d));
-  }
-  if (horizontal_only) {
-    for (Eigen::Vector3d& a : axes) a.z() = 0;
-  }
-  return VertexSetPenetration(BoxWorldVertices(model, world_T_object), part.vertices, axes);
-}
-
-std::string Mm(double m) {
-  char buf[32];
-  std::snprintf(buf, sizeof(buf), "%.1f mm", m * 1000);
-  return buf;
 }
 
 }  // namespace
@@ -926,40 +856,6 @@ StageLoss ClassifyLoss(const Model& model, int model_index, const Camera& camera
 
 namespace {
 
-// The fixed world: the table top's height and the other fixed objects' convex parts.
-struct FixedWorld {
-  double table_top_z = 0;
-  std::vector<FixedPart> parts;
-};
-
-FixedWorld ReadFixedWorld(const scene::Scene* fixed_world) {
-  FixedWorld out;
-  if (fixed_world == nullptr) return out;
-  for (const scene::SceneObject& o : fixed_world->objects) {
-    if (!o.fixed) continue;
-    if (o.name == "table") {
-      out.table_top_z = o.shape.WorldBounds(o.world_T_object).max.z();
-      continue;
-    }
-    for (const geometry::ShapePart& part : o.shape.parts()) {
-      const geometry::Pose3 world_T_part = o.world_T_object * part.shape_T_part;
-      FixedPart f;
-      f.name = o.name;
-      for (const Eigen::Vector3d& v : part.convex->vertices()) f.vertices.push_back(world_T_part * v);
-      for (const geometry::Face& face : part.convex->faces())
-        f.normals.push_back(world_T_part.Rotate(face.normal));
-      for (const geometry::Edge& e : part.convex->edges()) {
-        f.edge_dirs.push_back(world_T_part
-                                  .Rotate(part.convex->vertices()[static_cast<size_t>(e.v1)] -
-                                          part.convex->vertices()[static_cast<size_t>(e.v0)])
-                                  .normalized());
-      }
-      if (f.vertices.size() > 0) out.parts.push_back(std::move(f));
-    }
-  }
-  return out;
-}
-
 // The planes a block can rest on: the table and the fixed objects' flat tops above it.
 std::vector<SupportPlane> SupportPlanes(const FixedWorld& fixed, const RecognizerOptions& options) {
   SupportPlane table;
@@ -1018,126 +914,6 @@ RecognitionTrace::Outcome Judge(const PoseEvidence& e, const RecognizerOptions& 
   if (rule == Outcome::kCandidate) return score < options.min_evidence_score ? Outcome::kEvidence : rule;
   return score < options.accept_evidence_score ? rule : Outcome::kCandidate;
 }
-
-// 6. The model editor's rules (paper §4.3), each adjustment reported in the recognition's
-// adjustments: a recognition near the table is levelled and rested on it along the camera ray, then
-// fitted again there to the image's edge points; interpenetrating recognitions are separated by
-// the smallest moves, and pushed out of fixed objects.
-void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, const EdgeMap& edge_map,
-                           const FixedWorld& fixed, const RecognizerOptions& options,
-                           std::vector<Recognition>* objects_io) {
-  std::vector<Recognition>& objects = *objects_io;
-  std::vector<bool> resting(objects.size(), false);
-  const Eigen::Vector3d camera_centre = camera.world_T_camera().translation;
-  auto model_of = [&](const Recognition& r) -> const Model& {
-    return *std::find_if(models.models.begin(), models.models.end(),
-                         [&](const Model& m) { return m.name == r.model; });
-  };
-  for (size_t k = 0; k < objects.size(); ++k) {
-    Recognition& r = objects[k];
-    const Model& model = model_of(r);
-    auto lowest = [&]() { return LowestZ(model, r.world_T_object); };
-    if (lowest() - fixed.table_top_z > options.table_snap_distance_m) continue;
-    // Level a nearly flat face (the object cannot rest on the table tilted by a few degrees).
-    const Eigen::Matrix3d rot = r.world_T_object.RotationMatrix();
-    int axis = 0;
-    for (int a = 1; a < 3; ++a) {
-      if (std::abs(rot(2, a)) > std::abs(rot(2, axis))) axis = a;
-    }
-    const Eigen::Vector3d up_axis = rot.col(axis) * (rot(2, axis) >= 0 ? 1.0 : -1.0);
-    const double tilt = std::acos(std::clamp(up_axis.z(), -1.0, 1.0));
-    if (tilt <= options.table_snap_max_tilt_deg * M_PI / 180) {
-      if (tilt > 1e-9) {
-        const Eigen::Quaterniond level =
-            Eigen::Quaterniond::FromTwoVectors(up_axis, Eigen::Vector3d::UnitZ());
-        r.world_T_object.rotation = (level * r.world_T_object.rotation).normalized();
-        char buf[96];
-        std::snprintf(buf, sizeof(buf), "levelled onto the table: turned %.2f deg", tilt * 180 / M_PI);
-        r.adjustments.push_back(buf);
-      }
-      // Along the camera ray (the monocular system's weak direction, §4.2-4.3).
-      const Eigen::Vector3d ray = (r.world_T_object.translation - camera_centre).normalized();
-      const double dz = fixed.table_top_z - lowest();
-      const Eigen::Vector3d move =
-          std::abs(ray.z()) > 0.1 ? Eigen::Vector3d(ray * (dz / ray.z())) : Eigen::Vector3d(0, 0, dz);
-      r.world_T_object.translation += move;
-      resting[k] = true;
-      r.adjustments.push_back("rested on the table: moved " + Mm(move.norm()) +
-                              (std::abs(ray.z()) > 0.1 ? " along the camera ray" : " vertically"));
-    }
-  }
-  // Fitted again where it now rests (x, y and yaw on the table) to the image's edge points along its
-  // outline (PolishPose): lines beside an edge no longer pull it. The outline the other recognitions,
-  // where they now rest, hide (each box shrunk by 1 mm, as in the occlusion pass) is left out: there
-  // the front block's own edges would pull it.
-  if (options.polish_pose) {
-    std::vector<std::optional<Occluder>> occluders;
-    for (const Recognition& o : objects) {
-      occluders.push_back(
-          MakeOccluder(model_of(o), camera.camera_T_world() * o.world_T_object, kOccluderMarginM));
-    }
-    for (size_t k = 0; k < objects.size(); ++k) {
-      if (!resting[k]) continue;
-      Recognition& r = objects[k];
-      const Model& model = model_of(r);
-      std::vector<Occluder> others;
-      for (size_t j = 0; j < occluders.size(); ++j) {
-        if (j != k && occluders[j]) others.push_back(*occluders[j]);
-      }
-      const geometry::Pose3 camera_T_object = camera.camera_T_world() * r.world_T_object;
-      const PolishResult polished =
-          PolishPose(model, camera, camera_T_object, edge_map, true, 3,
-                     [&](const Eigen::Vector3d& point) { return HiddenByAny(others, point); });
-      if (polished.ok) {
-        const geometry::Pose3 before = r.world_T_object;
-        r.world_T_object = camera.world_T_camera() * polished.fit.camera_T_object;
-        r.reprojection_rms_px = polished.rms_px;
-        char buf[128];
-        std::snprintf(buf, sizeof(buf),
-                      "fitted on the table to %d edge points: moved %.2f mm, turned %.2f deg",
-                      polished.points, 1000 * (r.world_T_object.translation - before.translation).norm(),
-                      r.world_T_object.rotation.angularDistance(before.rotation) * 180 / M_PI);
-        r.adjustments.push_back(buf);
-      }
-    }
-  }
-  // Interpenetrating recognitions: the less certain one moves by the smallest separating move
-  // (horizontal only when it rests on the table); then out of fixed objects.
-  for (int pass = 0; pass < 3; ++pass) {
-    bool moved = false;
-    for (size_t i = 0; i < objects.size(); ++i) {
-      for (size_t j = 0; j < objects.size(); ++j) {
-        if (i == j || objects[i].score > objects[j].score ||
-            (objects[i].score == objects[j].score && i < j)) {
-          continue;  // i moves when it scores lower
-        }
-        Recognition& ri = objects[i];
-        const Recognition& rj = objects[j];
-        const Penetration pen = BoxBoxPenetration(model_of(ri).box_size_m, ri.world_T_object,
-                                                  model_of(rj).box_size_m, rj.world_T_object, resting[i]);
-        if (pen.depth_m <= 1e-5) continue;
-        ri.world_T_object.translation += pen.direction * (pen.depth_m + 1e-5);
-        ri.adjustments.push_back("separated from the " + rj.model + " recognized at (" +
-                                 Mm(rj.world_T_object.translation.x()) + ", " +
-                                 Mm(rj.world_T_object.translation.y()) + "): moved " + Mm(pen.depth_m));
-        moved = true;
-      }
-      for (const FixedPart& part : fixed.parts) {
-        Recognition& ri = objects[i];
-        const Penetration pen = PartPenetration(model_of(ri), ri.world_T_object, part, resting[i]);
-        if (pen.depth_m <= 1e-5) continue;
-        ri.world_T_object.translation += pen.direction * (pen.depth_m + 1e-5);
-        ri.adjustments.push_back("pushed out of " + part.name + ": moved " + Mm(pen.depth_m));
-        moved = true;
-      }
-    }
-    if (!moved) break;
-  }
-}
-
-}  // namespace
-
-namespace {
 
 using Outcome = RecognitionTrace::Outcome;
 

@@ -1,0 +1,226 @@
+// The model editor's rules (issue 7, item 6; paper §4.3) and the world geometry the recognizer's
+// verification and selection share with them (model_editor.h).
+#include "model_editor.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <utility>
+
+namespace teachsim::vision::internal {
+
+namespace {
+
+std::string Mm(double m) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.1f mm", m * 1000);
+  return buf;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------- the fixed world and boxes
+
+FixedWorld ReadFixedWorld(const scene::Scene* fixed_world) {
+  FixedWorld out;
+  if (fixed_world == nullptr) return out;
+  for (const scene::SceneObject& o : fixed_world->objects) {
+    if (!o.fixed) continue;
+    if (o.name == "table") {
+      out.table_top_z = o.shape.WorldBounds(o.world_T_object).max.z();
+      continue;
+    }
+    for (const geometry::ShapePart& part : o.shape.parts()) {
+      const geometry::Pose3 world_T_part = o.world_T_object * part.shape_T_part;
+      FixedPart f;
+      f.name = o.name;
+      for (const Eigen::Vector3d& v : part.convex->vertices()) f.vertices.push_back(world_T_part * v);
+      for (const geometry::Face& face : part.convex->faces())
+        f.normals.push_back(world_T_part.Rotate(face.normal));
+      for (const geometry::Edge& e : part.convex->edges()) {
+        f.edge_dirs.push_back(world_T_part
+                                  .Rotate(part.convex->vertices()[static_cast<size_t>(e.v1)] -
+                                          part.convex->vertices()[static_cast<size_t>(e.v0)])
+                                  .normalized());
+      }
+      if (f.vertices.size() > 0) out.parts.push_back(std::move(f));
+    }
+  }
+  return out;
+}
+
+std::vector<Eigen::Vector3d> BoxWorldVertices(const Model& model, const geometry::Pose3& world_T_object) {
+  std::vector<Eigen::Vector3d> v;
+  for (int i = 0; i < 8; ++i) v.push_back(world_T_object * BoxVertex(model.box_size_m, i));
+  return v;
+}
+
+double LowestZ(const Model& model, const geometry::Pose3& world_T_object) {
+  double z = 1e9;
+  for (const Eigen::Vector3d& v : BoxWorldVertices(model, world_T_object)) z = std::min(z, v.z());
+  return z;
+}
+
+Penetration PartPenetration(const Model& model, const geometry::Pose3& world_T_object, const FixedPart& part,
+                            bool horizontal_only) {
+  std::vector<Eigen::Vector3d> axes = part.normals;
+  const Eigen::Matrix3d r = world_T_object.RotationMatrix();
+  for (int i = 0; i < 3; ++i) {
+    axes.push_back(r.col(i));
+    for (const Eigen::Vector3d& d : part.edge_dirs) axes.push_back(r.col(i).cross(d));
+  }
+  if (horizontal_only) {
+    for (Eigen::Vector3d& a : axes) a.z() = 0;
+  }
+  return VertexSetPenetration(BoxWorldVertices(model, world_T_object), part.vertices, axes);
+}
+
+// ---------------------------------------------------------------- occluders
+
+std::optional<Occluder> MakeOccluder(const Model& model, const geometry::Pose3& camera_T_box,
+                                     double margin_m) {
+  const Eigen::Vector3d half = 0.5 * model.box_size_m - Eigen::Vector3d::Constant(margin_m);
+  if ((half.array() <= 0).any()) return std::nullopt;
+  return Occluder{camera_T_box.Inverse(), half};
+}
+
+bool Hides(const Occluder& o, const Eigen::Vector3d& point_in_camera) {
+  const Eigen::Vector3d& origin = o.box_T_camera.translation;
+  const Eigen::Vector3d d = o.box_T_camera * point_in_camera - origin;
+  double t0 = 0, t1 = 1;
+  for (int a = 0; a < 3 && t0 <= t1; ++a) {
+    if (std::abs(d[a]) < 1e-12) {
+      if (std::abs(origin[a]) > o.half[a]) return false;
+      continue;
+    }
+    double ta = (-o.half[a] - origin[a]) / d[a], tb = (o.half[a] - origin[a]) / d[a];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  return t0 <= t1;
+}
+
+bool HiddenByAny(const std::vector<Occluder>& occluders, const Eigen::Vector3d& point_in_camera) {
+  for (const Occluder& o : occluders) {
+    if (Hides(o, point_in_camera)) return true;
+  }
+  return false;
+}
+
+// ---------------------------------------------------------------- the model editor's rules
+
+void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, const EdgeMap& edge_map,
+                           const FixedWorld& fixed, const RecognizerOptions& options,
+                           std::vector<Recognition>* objects_io) {
+  std::vector<Recognition>& objects = *objects_io;
+  std::vector<bool> resting(objects.size(), false);
+  const Eigen::Vector3d camera_centre = camera.world_T_camera().translation;
+  auto model_of = [&](const Recognition& r) -> const Model& {
+    return *std::find_if(models.models.begin(), models.models.end(),
+                         [&](const Model& m) { return m.name == r.model; });
+  };
+  for (size_t k = 0; k < objects.size(); ++k) {
+    Recognition& r = objects[k];
+    const Model& model = model_of(r);
+    auto lowest = [&]() { return LowestZ(model, r.world_T_object); };
+    if (lowest() - fixed.table_top_z > options.table_snap_distance_m) continue;
+    // Level a nearly flat face (the object cannot rest on the table tilted by a few degrees).
+    const Eigen::Matrix3d rot = r.world_T_object.RotationMatrix();
+    int axis = 0;
+    for (int a = 1; a < 3; ++a) {
+      if (std::abs(rot(2, a)) > std::abs(rot(2, axis))) axis = a;
+    }
+    const Eigen::Vector3d up_axis = rot.col(axis) * (rot(2, axis) >= 0 ? 1.0 : -1.0);
+    const double tilt = std::acos(std::clamp(up_axis.z(), -1.0, 1.0));
+    if (tilt <= options.table_snap_max_tilt_deg * M_PI / 180) {
+      if (tilt > 1e-9) {
+        const Eigen::Quaterniond level =
+            Eigen::Quaterniond::FromTwoVectors(up_axis, Eigen::Vector3d::UnitZ());
+        r.world_T_object.rotation = (level * r.world_T_object.rotation).normalized();
+        char buf[96];
+        std::snprintf(buf, sizeof(buf), "levelled onto the table: turned %.2f deg", tilt * 180 / M_PI);
+        r.adjustments.push_back(buf);
+      }
+      // Along the camera ray (the monocular system's weak direction, §4.2-4.3).
+      const Eigen::Vector3d ray = (r.world_T_object.translation - camera_centre).normalized();
+      const double dz = fixed.table_top_z - lowest();
+      const Eigen::Vector3d move =
+          std::abs(ray.z()) > 0.1 ? Eigen::Vector3d(ray * (dz / ray.z())) : Eigen::Vector3d(0, 0, dz);
+      r.world_T_object.translation += move;
+      resting[k] = true;
+      r.adjustments.push_back("rested on the table: moved " + Mm(move.norm()) +
+                              (std::abs(ray.z()) > 0.1 ? " along the camera ray" : " vertically"));
+    }
+  }
+  // Fitted again where it now rests (x, y and yaw on the table) to the image's edge points along its
+  // outline (PolishPose): lines beside an edge no longer pull it. The outline the other recognitions,
+  // where they now rest, hide (each box shrunk by 1 mm, as in the occlusion pass) is left out: there
+  // the front block's own edges would pull it.
+  if (options.polish_pose) {
+    std::vector<std::optional<Occluder>> occluders;
+    for (const Recognition& o : objects) {
+      occluders.push_back(
+          MakeOccluder(model_of(o), camera.camera_T_world() * o.world_T_object, kOccluderMarginM));
+    }
+    for (size_t k = 0; k < objects.size(); ++k) {
+      if (!resting[k]) continue;
+      Recognition& r = objects[k];
+      const Model& model = model_of(r);
+      std::vector<Occluder> others;
+      for (size_t j = 0; j < occluders.size(); ++j) {
+        if (j != k && occluders[j]) others.push_back(*occluders[j]);
+      }
+      const geometry::Pose3 camera_T_object = camera.camera_T_world() * r.world_T_object;
+      const PolishResult polished =
+          PolishPose(model, camera, camera_T_object, edge_map, true, 3,
+                     [&](const Eigen::Vector3d& point) { return HiddenByAny(others, point); });
+      if (polished.ok) {
+        const geometry::Pose3 before = r.world_T_object;
+        r.world_T_object = camera.world_T_camera() * polished.fit.camera_T_object;
+        r.reprojection_rms_px = polished.rms_px;
+        char buf[128];
+        std::snprintf(buf, sizeof(buf),
+                      "fitted on the table to %d edge points: moved %.2f mm, turned %.2f deg",
+                      polished.points, 1000 * (r.world_T_object.translation - before.translation).norm(),
+                      r.world_T_object.rotation.angularDistance(before.rotation) * 180 / M_PI);
+        r.adjustments.push_back(buf);
+      }
+    }
+  }
+  // Interpenetrating recognitions: the less certain one moves by the smallest separating move
+  // (horizontal only when it rests on the table); then out of fixed objects.
+  for (int pass = 0; pass < 3; ++pass) {
+    bool moved = false;
+    for (size_t i = 0; i < objects.size(); ++i) {
+      for (size_t j = 0; j < objects.size(); ++j) {
+        if (i == j || objects[i].score > objects[j].score ||
+            (objects[i].score == objects[j].score && i < j)) {
+          continue;  // i moves when it scores lower
+        }
+        Recognition& ri = objects[i];
+        const Recognition& rj = objects[j];
+        const Penetration pen = BoxBoxPenetration(model_of(ri).box_size_m, ri.world_T_object,
+                                                  model_of(rj).box_size_m, rj.world_T_object, resting[i]);
+        if (pen.depth_m <= 1e-5) continue;
+        ri.world_T_object.translation += pen.direction * (pen.depth_m + 1e-5);
+        ri.adjustments.push_back("separated from the " + rj.model + " recognized at (" +
+                                 Mm(rj.world_T_object.translation.x()) + ", " +
+                                 Mm(rj.world_T_object.translation.y()) + "): moved " + Mm(pen.depth_m));
+        moved = true;
+      }
+      for (const FixedPart& part : fixed.parts) {
+        Recognition& ri = objects[i];
+        const Penetration pen = PartPenetration(model_of(ri), ri.world_T_object, part, resting[i]);
+        if (pen.depth_m <= 1e-5) continue;
+        ri.world_T_object.translation += pen.direction * (pen.depth_m + 1e-5);
+        ri.adjustments.push_back("pushed out of " + part.name + ": moved " + Mm(pen.depth_m));
+        moved = true;
+      }
+    }
+    if (!moved) break;
+  }
+}
+
+}  // namespace teachsim::vision::internal
