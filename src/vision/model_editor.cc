@@ -12,6 +12,7 @@ namespace teachsim::vision::internal {
 
 namespace {
 
+// A length in metres as the adjustments' text gives it: "12.3 mm".
 std::string Mm(double m) {
   char buf[32];
   std::snprintf(buf, sizeof(buf), "%.1f mm", m * 1000);

@@ -61,10 +61,10 @@ struct RecognizerOptions {
                                              // times the true one's distance; 0: exact. On seeds 7-19 0, 1 and 2
                                              // found the same blocks, one more than FLANN at 32 checks; 1.7 ms
                                              // per image (FLANN 6.8, exact 3)
-  int max_index_queries = 50;  // groups per kind looked up in the index, longest first (images with wood
-                               // grain give up to 1000). 150 until session 24; with 10 fits, 150 -> 50
-                               // on render seeds 7-41: found >= 0.7 visible 6308 -> 6307, 0.4-0.7
-                               // 165 -> 166, false 78 -> 75, the index stage about half the time
+  // Groups per kind looked up in the index, longest first (images with wood grain give up to 1000).
+  // 150 until session 24; with 10 fits, 150 -> 50 on render seeds 7-41: found >= 0.7 visible 6308 ->
+  // 6307, 0.4-0.7 165 -> 166, false 78 -> 75, the index stage about half the time.
+  int max_index_queries = 50;
   int max_hypotheses = 10;                   // index hypotheses tried per image, most probable first, after the
                                              // support-plane ones (120 before that source, 60 until session 23).
                                              // Render seeds 7-18, 60/40/30/20/10/5: found >= 0.7 visible 2181/
