@@ -77,39 +77,6 @@ Penetration PartPenetration(const Model& model, const geometry::Pose3& world_T_o
   return VertexSetPenetration(BoxWorldVertices(model, world_T_object), part.vertices, axes);
 }
 
-// ---------------------------------------------------------------- occluders
-
-std::optional<Occluder> MakeOccluder(const Model& model, const geometry::Pose3& camera_T_box,
-                                     double margin_m) {
-  const Eigen::Vector3d half = 0.5 * model.box_size_m - Eigen::Vector3d::Constant(margin_m);
-  if ((half.array() <= 0).any()) return std::nullopt;
-  return Occluder{camera_T_box.Inverse(), half};
-}
-
-bool Hides(const Occluder& o, const Eigen::Vector3d& point_in_camera) {
-  const Eigen::Vector3d& origin = o.box_T_camera.translation;
-  const Eigen::Vector3d d = o.box_T_camera * point_in_camera - origin;
-  double t0 = 0, t1 = 1;
-  for (int a = 0; a < 3 && t0 <= t1; ++a) {
-    if (std::abs(d[a]) < 1e-12) {
-      if (std::abs(origin[a]) > o.half[a]) return false;
-      continue;
-    }
-    double ta = (-o.half[a] - origin[a]) / d[a], tb = (o.half[a] - origin[a]) / d[a];
-    if (ta > tb) std::swap(ta, tb);
-    t0 = std::max(t0, ta);
-    t1 = std::min(t1, tb);
-  }
-  return t0 <= t1;
-}
-
-bool HiddenByAny(const std::vector<Occluder>& occluders, const Eigen::Vector3d& point_in_camera) {
-  for (const Occluder& o : occluders) {
-    if (Hides(o, point_in_camera)) return true;
-  }
-  return false;
-}
-
 // ---------------------------------------------------------------- the model editor's rules
 
 void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, const EdgeMap& edge_map,

@@ -5,8 +5,11 @@
 // accepted recognitions as occluders of what lies behind them.
 
 #include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "teachsim/geometry/pose.h"
@@ -53,13 +56,39 @@ struct Occluder {
 };
 
 // Nothing when the margin leaves no box.
-std::optional<Occluder> MakeOccluder(const Model& model, const geometry::Pose3& camera_T_box,
-                                     double margin_m);
+inline std::optional<Occluder> MakeOccluder(const Model& model, const geometry::Pose3& camera_T_box,
+                                            double margin_m) {
+  const Eigen::Vector3d half = 0.5 * model.box_size_m - Eigen::Vector3d::Constant(margin_m);
+  if ((half.array() <= 0).any()) return std::nullopt;
+  return Occluder{camera_T_box.Inverse(), half};
+}
 
 // Whether the segment from the camera to a point (camera frame) passes through the occluder's box
-// (slab test, in the box's frame).
-bool Hides(const Occluder& o, const Eigen::Vector3d& point_in_camera);
-bool HiddenByAny(const std::vector<Occluder>& occluders, const Eigen::Vector3d& point_in_camera);
+// (slab test, in the box's frame). Inline, with HiddenByAny: verification and the occlusion pass ask
+// it for every outline sample.
+inline bool Hides(const Occluder& o, const Eigen::Vector3d& point_in_camera) {
+  const Eigen::Vector3d& origin = o.box_T_camera.translation;
+  const Eigen::Vector3d d = o.box_T_camera * point_in_camera - origin;
+  double t0 = 0, t1 = 1;
+  for (int a = 0; a < 3 && t0 <= t1; ++a) {
+    if (std::abs(d[a]) < 1e-12) {
+      if (std::abs(origin[a]) > o.half[a]) return false;
+      continue;
+    }
+    double ta = (-o.half[a] - origin[a]) / d[a], tb = (o.half[a] - origin[a]) / d[a];
+    if (ta > tb) std::swap(ta, tb);
+    t0 = std::max(t0, ta);
+    t1 = std::min(t1, tb);
+  }
+  return t0 <= t1;
+}
+
+inline bool HiddenByAny(const std::vector<Occluder>& occluders, const Eigen::Vector3d& point_in_camera) {
+  for (const Occluder& o : occluders) {
+    if (Hides(o, point_in_camera)) return true;
+  }
+  return false;
+}
 
 // 6. The model editor's rules (paper §4.3), each adjustment reported in the recognition's
 // adjustments: a recognition near the table is levelled and rested on it along the camera ray, then
