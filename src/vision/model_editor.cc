@@ -141,9 +141,10 @@ void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, con
         if (j != k && occluders[j]) others.push_back(*occluders[j]);
       }
       const geometry::Pose3 camera_T_object = camera.camera_T_world() * r.world_T_object;
-      const PolishResult polished =
-          PolishPose(model, camera, camera_T_object, edge_map, true, 3,
-                     [&](const Eigen::Vector3d& point) { return HiddenByAny(others, point); });
+      const PolishResult polished = PolishPose(
+          model, camera, camera_T_object, edge_map, true, 3,
+          [&](const Eigen::Vector3d& point) { return HiddenByAny(others, point); },
+          /*weigh_by_contrast=*/true);
       if (polished.ok) {
         const geometry::Pose3 before = r.world_T_object;
         r.world_T_object = camera.world_T_camera() * polished.fit.camera_T_object;

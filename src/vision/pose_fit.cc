@@ -122,11 +122,11 @@ struct NormalEquations {
 };
 template <int N>
 NormalEquations<N> WeightedNormalEquations(const Eigen::Matrix<double, Eigen::Dynamic, 6>& J6,
-                                           const Eigen::VectorXd& r, const RobustLoss& loss,
-                                           const Eigen::Matrix<double, 6, N>& basis) {
+                                           const Eigen::VectorXd& r, const std::vector<LineMatch>& matches,
+                                           const RobustLoss& loss, const Eigen::Matrix<double, 6, N>& basis) {
   NormalEquations<N> out;
   for (Eigen::Index i = 0; i < r.size(); ++i) {
-    const double wi = LossWeight(r(i), loss);
+    const double wi = matches[static_cast<size_t>(i / 2)].weight * LossWeight(r(i), loss);
     if (wi == 0) continue;
     const Eigen::Matrix<double, 1, N> row = J6.row(i) * basis;
     out.H.noalias() += wi * row.transpose() * row;
@@ -157,7 +157,8 @@ FitResult FitLm(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const g
 
   auto cost = [&](const Eigen::VectorXd& res) {
     double c = 0;
-    for (Eigen::Index i = 0; i < res.size(); ++i) c += LossCost(res(i), loss);
+    for (Eigen::Index i = 0; i < res.size(); ++i)
+      c += matches[static_cast<size_t>(i / 2)].weight * LossCost(res(i), loss);
     return c;
   };
 
@@ -168,7 +169,7 @@ FitResult FitLm(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const g
   for (int it = 0; it < max_iterations; ++it) {
     out.iterations = it + 1;
     Residuals(size_m, K_inv_t, pose, matches, &r, &J6);
-    const NormalEquations<N> normal = WeightedNormalEquations<N>(J6, r, loss, basis);
+    const NormalEquations<N> normal = WeightedNormalEquations<N>(J6, r, matches, loss, basis);
     const MatrixNd& H = normal.H;
     const VectorNd& g = normal.g;
     bool improved = false;
@@ -216,7 +217,7 @@ Matrix6d Covariance(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, con
   Eigen::VectorXd r(m);
   Eigen::Matrix<double, Eigen::Dynamic, 6> J(m, 6);
   Residuals(size_m, K_inv_t, camera_T_object, matches, &r, &J);
-  const NormalEquations<6> normal = WeightedNormalEquations<6>(J, r, loss, Matrix6d::Identity());
+  const NormalEquations<6> normal = WeightedNormalEquations<6>(J, r, matches, loss, Matrix6d::Identity());
   const Matrix6d& H = normal.H;
   // Residuals with a weight only (Tukey's rejected ones carry no information).
   const double weighted = normal.weighted_squares;

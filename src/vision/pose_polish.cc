@@ -21,10 +21,13 @@ constexpr double kCornerMargin = 0.08;  // of the edge's length left out at each
 constexpr int kMinPointsPerEdge = 4, kMinEdges = 3, kRounds = 2, kIterations = 10;
 constexpr double kTukeyPx = 2, kMaxMovePx = 2;
 
-// The edge points near the predicted visible edges at a pose, as zero-length segments for the line fit.
+// The edge points near the predicted visible edges at a pose, as zero-length segments for the line
+// fit; weighed by their squared gradient magnitude, scaled to a mean of 1, when weigh_by_contrast
+// (else 1 each).
 std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera,
                                   const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
-                                  double search_px, const HiddenTest& hidden, int* edges_with_points) {
+                                  double search_px, const HiddenTest& hidden, bool weigh_by_contrast,
+                                  int* edges_with_points) {
   const Eigen::Matrix3d K = camera.K();
   const Intrinsics& k = camera.intrinsics();
   const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
@@ -59,10 +62,17 @@ std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera,
           Eigen::Vector2d((distorted.x() - k.cx) / k.fx, (distorted.y() - k.cy) / k.fy), x.head<2>() / x.z());
       if (!ideal) continue;
       const Eigen::Vector2d p(k.fx * ideal->x() + k.cx, k.fy * ideal->y() + k.cy);
-      out.push_back({e, p, p});
+      const double magnitude = edge_map.magnitude.at<float>(edge->y, edge->x);
+      out.push_back({e, p, p, weigh_by_contrast ? magnitude * magnitude : 1.0});
       ++found;
     }
     if (found >= kMinPointsPerEdge) ++*edges_with_points;
+  }
+  if (weigh_by_contrast && !out.empty()) {
+    double sum = 0;
+    for (const LineMatch& m : out) sum += m.weight;
+    const double mean = sum / static_cast<double>(out.size());
+    for (LineMatch& m : out) m.weight = mean > 0 ? m.weight / mean : 1.0;
   }
   return out;
 }
@@ -70,14 +80,15 @@ std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera,
 }  // namespace
 
 PolishResult PolishPose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                        const EdgeMap& edge_map, bool on_plane, double search_px, const HiddenTest& hidden) {
+                        const EdgeMap& edge_map, bool on_plane, double search_px, const HiddenTest& hidden,
+                        bool weigh_by_contrast) {
   PolishResult out;
   const Eigen::Matrix3d K = camera.K();
   geometry::Pose3 pose = camera_T_object;
   std::vector<LineMatch> points;
   for (int round = 0; round < kRounds; ++round) {
     int edges = 0;
-    points = EdgePoints(model, camera, pose, edge_map, search_px, hidden, &edges);
+    points = EdgePoints(model, camera, pose, edge_map, search_px, hidden, weigh_by_contrast, &edges);
     if (edges < kMinEdges) return out;
     const RobustLoss loss{RobustLoss::Kind::kTukey, kTukeyPx};
     out.fit = on_plane ? FitPoseOnPlane(model.box_size_m, K, camera.camera_T_world(), pose, points, kIterations, loss)

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <random>
 
 #include "synthetic_scene.h"
@@ -153,39 +154,65 @@ TEST(PoseFitTest, PolishOnEdgePointsRecoversAPoseOnTheTable) {
   EXPECT_FALSE(PolishPose(bar, camera, camera.camera_T_world() * elsewhere, detection.edge_map, true).ok);
 }
 
+// A box's longest projected outline edge: its ends a, b (px) and the unit normal pointing out of the
+// box; nullopt when a corner is behind the camera.
+struct OutlineEdge {
+  Eigen::Vector2d a = Eigen::Vector2d::Zero(), b = Eigen::Vector2d::Zero(), out = Eigen::Vector2d::Zero();
+  double length = 0;
+};
+std::optional<OutlineEdge> LongestOutlineEdge(const Camera& camera, const Model& model,
+                                              const geometry::Pose3& world_T_object) {
+  const geometry::Pose3 camera_T_object = camera.camera_T_world() * world_T_object;
+  const uint16_t outline = OutlineBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
+  OutlineEdge edge;
+  for (int e = 0; e < 12; ++e) {
+    if (!(outline >> e & 1)) continue;
+    const auto p =
+        camera.Project(world_T_object * BoxVertex(model.box_size_m, kBoxEdges[static_cast<size_t>(e)][0]));
+    const auto q =
+        camera.Project(world_T_object * BoxVertex(model.box_size_m, kBoxEdges[static_cast<size_t>(e)][1]));
+    if (!p || !q) return std::nullopt;
+    if ((*q - *p).norm() > edge.length) edge.length = (*q - *p).norm(), edge.a = *p, edge.b = *q;
+  }
+  const Eigen::Vector2d along = (edge.b - edge.a).normalized(),
+                        centre = *camera.Project(world_T_object.translation);
+  edge.out = Eigen::Vector2d(-along.y(), along.x());
+  if (edge.out.dot(edge.a - centre) < 0) edge.out = -edge.out;
+  return edge;
+}
+
+// A border over the far half of a box's longest outline edge (as of a lit face in front of it): a
+// quadrilateral from 0 px out at the edge's middle to 2.5 px out at its end (further out the polish's
+// Tukey weights leave it alone), reaching 12 px into the box and 20 px past the edge's end.
+std::vector<Eigen::Vector2d> BorderOverTheLongestOutlineEdge(const OutlineEdge& edge) {
+  const Eigen::Vector2d along = (edge.b - edge.a).normalized();
+  const Eigen::Vector2d middle = 0.5 * (edge.a + edge.b), beyond = edge.b + 20 * along;
+  return {middle, beyond + 2.5 * (1 + 40 / edge.length) * edge.out, beyond - 12 * edge.out,
+          middle - 12 * edge.out};
+}
+
+void Paint(cv::Mat& image, const std::vector<Eigen::Vector2d>& quadrilateral, int grey) {
+  std::vector<cv::Point> polygon;
+  for (const Eigen::Vector2d& p : quadrilateral)
+    polygon.emplace_back(static_cast<int>(std::lround(p.x())), static_cast<int>(std::lround(p.y())));
+  cv::fillConvexPoly(image, polygon, cv::Scalar(grey), cv::LINE_AA);
+}
+
 // The editor's polish leaves out the outline that something in front hides: the far half of the bar's
-// longest outline edge is covered by a lit face (as of a block in front of it) whose border runs from
-// 0 px at the edge's middle to 2.5 px out at its end. Sampled there, the border turns the polished
-// pose (by a few hundredths of a degree in this clean image); with those samples reported hidden, the
-// polish keeps the bar's pose.
+// longest outline edge is covered by a lit face (BorderOverTheLongestOutlineEdge). Sampled there, the
+// border turns the polished pose (by a few hundredths of a degree in this clean image); with those
+// samples reported hidden, the polish keeps the bar's pose.
 TEST(PoseFitTest, PolishLeavesOutTheHiddenOutline) {
   const Camera camera = SyntheticCamera();
   const Model bar = Bar();
   const geometry::Pose3 truth = OnTable(bar.box_size_m, 0.02, -0.01, 0.4);
   cv::Mat image = RenderBoxes(camera, {{bar.box_size_m, truth}}, 13);
   const geometry::Pose3 camera_T_bar = camera.camera_T_world() * truth;
-  const uint16_t outline = OutlineBoxEdges(bar.box_size_m, camera_T_bar.Inverse().translation);
-  Eigen::Vector2d a = Eigen::Vector2d::Zero(), b = Eigen::Vector2d::Zero();
-  double longest = 0;
-  for (int e = 0; e < 12; ++e) {
-    if (!(outline >> e & 1)) continue;
-    const auto p = camera.Project(truth * BoxVertex(bar.box_size_m, kBoxEdges[static_cast<size_t>(e)][0]));
-    const auto q = camera.Project(truth * BoxVertex(bar.box_size_m, kBoxEdges[static_cast<size_t>(e)][1]));
-    ASSERT_TRUE(p && q);
-    if ((*q - *p).norm() > longest) longest = (*q - *p).norm(), a = *p, b = *q;
-  }
-  ASSERT_GT(longest, 80);
-  const Eigen::Vector2d along = (b - a).normalized(), centre = *camera.Project(truth.translation);
-  Eigen::Vector2d out(-along.y(), along.x());
-  if (out.dot(a - centre) < 0) out = -out;
-  const Eigen::Vector2d middle = 0.5 * (a + b), beyond = b + 20 * along;
-  // The border 2.5 px out at the edge's end (further out the polish's Tukey weights leave it alone).
-  const std::vector<Eigen::Vector2d> cover = {middle, beyond + 2.5 * (1 + 40 / longest) * out,
-                                              beyond - 12 * out, middle - 12 * out};
-  std::vector<cv::Point> polygon;
-  for (const Eigen::Vector2d& p : cover)
-    polygon.emplace_back(static_cast<int>(std::lround(p.x())), static_cast<int>(std::lround(p.y())));
-  cv::fillConvexPoly(image, polygon, cv::Scalar(235), cv::LINE_AA);
+  const std::optional<OutlineEdge> edge = LongestOutlineEdge(camera, bar, truth);
+  ASSERT_TRUE(edge);
+  ASSERT_GT(edge->length, 80);
+  const std::vector<Eigen::Vector2d> cover = BorderOverTheLongestOutlineEdge(*edge);
+  Paint(image, cover, 235);
   const LineDetection detection = DetectLinesAndEdges(image, camera, RecognizerOptions());
   std::vector<cv::Point2f> contour;
   for (const Eigen::Vector2d& p : cover)
@@ -214,6 +241,87 @@ TEST(PoseFitTest, PolishLeavesOutTheHiddenOutline) {
   EXPECT_FALSE(PolishPose(bar, camera, camera_T_bar, detection.edge_map, true, 3, [](const Eigen::Vector3d&) {
                  return true;
                }).ok);
+}
+
+// Each match's weight scales its pull on the fit: edge points along a bar's rendered edges and as many
+// along the edges of the bar turned by 1 deg on the table; the fit on the plane starts from a turn of
+// 0.7 deg. Weighing the turned ones 1e-3, it comes back onto the bar; weighing both alike, it ends
+// halfway.
+TEST(PoseFitTest, EachMatchPullsByItsWeight) {
+  const Camera camera = SyntheticCamera();
+  const Model bar = Bar();
+  const geometry::Pose3 truth = camera.camera_T_world() * OnTable(bar.box_size_m, 0.02, -0.01, 0.4);
+  const geometry::Pose3 turned =
+      camera.camera_T_world() * OnTable(bar.box_size_m, 0.02, -0.01, 0.4 + M_PI / 180);
+  const uint16_t visible = VisibleBoxEdges(bar.box_size_m, truth.Inverse().translation);
+  const auto points_on = [&](const geometry::Pose3& pose, double weight) {
+    std::vector<LineMatch> out;
+    for (int e = 0; e < 12; ++e) {
+      if (!(visible >> e & 1)) continue;
+      const Eigen::Vector3d p = pose * BoxVertex(bar.box_size_m, kBoxEdges[static_cast<size_t>(e)][0]);
+      const Eigen::Vector3d q = pose * BoxVertex(bar.box_size_m, kBoxEdges[static_cast<size_t>(e)][1]);
+      for (double t = 0.1; t < 0.95; t += 0.1) {
+        const Eigen::Vector2d x = (camera.K() * (p + t * (q - p))).hnormalized();
+        out.push_back({e, x, x, weight});
+      }
+    }
+    return out;
+  };
+  double error_deg[2];
+  for (const bool alike : {false, true}) {
+    std::vector<LineMatch> points = points_on(truth, 1.0);
+    const std::vector<LineMatch> others = points_on(turned, alike ? 1.0 : 1e-3);
+    points.insert(points.end(), others.begin(), others.end());
+    const geometry::Pose3 start =
+        camera.camera_T_world() * OnTable(bar.box_size_m, 0.02, -0.01, 0.4 + 0.7 * M_PI / 180);
+    const FitResult fit = FitPoseOnPlane(bar.box_size_m, camera.K(), camera.camera_T_world(), start, points,
+                                         20, RobustLoss{RobustLoss::Kind::kHuber, 0});
+    error_deg[alike] = geometry::RotationAngle(fit.camera_T_object, truth) * 180 / M_PI;
+  }
+  EXPECT_LT(error_deg[false], 0.005);
+  EXPECT_NEAR(error_deg[true], 0.5, 0.1);
+}
+
+// The editor's polish weighs each edge point by its squared gradient magnitude (weigh_by_contrast):
+// the far half of the bar's longest outline edge is moved out to a border 0 px out at the edge's
+// middle and 2.5 px out at its end (a wedge of the face's own grey), once against the table (crisp)
+// and once against a band 15 grey levels darker than the face (faint). Weighed, the crisp border
+// pulls the polished pose and the faint one hardly does, so the two poses differ; unweighed, both
+// borders' points count alike and the poses agree.
+TEST(PoseFitTest, PolishWeighsEdgePointsByTheirContrast) {
+  const Camera camera = SyntheticCamera();
+  const Model bar = Bar();
+  const geometry::Pose3 truth = OnTable(bar.box_size_m, 0.02, -0.01, 0.4);
+  const std::optional<OutlineEdge> edge = LongestOutlineEdge(camera, bar, truth);
+  ASSERT_TRUE(edge);
+  ASSERT_GT(edge->length, 80);
+  const Eigen::Vector2d middle = 0.5 * (edge->a + edge->b), tilted_end = edge->b + 2.5 * edge->out;
+  const cv::Mat clean = RenderBoxes(camera, {{bar.box_size_m, truth}}, 13);
+  const Eigen::Vector2d inside = middle - 4 * edge->out;
+  const int face =
+      clean.at<uint8_t>(static_cast<int>(std::lround(inside.y())), static_cast<int>(std::lround(inside.x())));
+  ASSERT_GT(face, 90 + 60);             // the table is grey 90: the edge is crisp
+  geometry::Pose3 polished_pose[2][2];  // [faint][weighed], world_T_bar
+  for (const bool faint : {false, true}) {
+    cv::Mat image = clean.clone();
+    if (faint)
+      Paint(image, {middle, tilted_end, tilted_end + 14 * edge->out, middle + 14 * edge->out}, face - 15);
+    Paint(image, {middle, tilted_end, edge->b}, face);
+    const LineDetection detection = DetectLinesAndEdges(image, camera, RecognizerOptions());
+    for (const bool weighed : {false, true}) {
+      const PolishResult polished = PolishPose(bar, camera, camera.camera_T_world() * truth,
+                                               detection.edge_map, true, 3, HiddenTest{}, weighed);
+      ASSERT_TRUE(polished.ok) << faint << weighed;
+      polished_pose[faint][weighed] = camera.world_T_camera() * polished.fit.camera_T_object;
+      EXPECT_LT((polished_pose[faint][weighed].translation - truth.translation).norm(), 0.0003)
+          << faint << weighed;
+    }
+  }
+  const auto turn_deg = [&](bool weighed) {
+    return geometry::RotationAngle(polished_pose[false][weighed], polished_pose[true][weighed]) * 180 / M_PI;
+  };
+  EXPECT_GT(turn_deg(true), 0.05);
+  EXPECT_LT(turn_deg(false), 0.2 * turn_deg(true));
 }
 
 // Verification's edge-point refit: from a pose 1.2 mm and 1 deg off (as a line fit pulled by a grain
