@@ -144,7 +144,7 @@ void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, con
       const PolishResult polished = PolishPose(
           model, camera, camera_T_object, edge_map, true, 3,
           [&](const Eigen::Vector3d& point) { return HiddenByAny(others, point); },
-          /*weigh_by_contrast=*/true);
+          /*weigh_above=*/2 * options.canny_high);
       if (polished.ok) {
         const geometry::Pose3 before = r.world_T_object;
         r.world_T_object = camera.world_T_camera() * polished.fit.camera_T_object;

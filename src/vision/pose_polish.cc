@@ -22,11 +22,10 @@ constexpr int kMinPointsPerEdge = 4, kMinEdges = 3, kRounds = 2, kIterations = 1
 constexpr double kTukeyPx = 2, kMaxMovePx = 2;
 
 // The edge points near the predicted visible edges at a pose, as zero-length segments for the line
-// fit; weighed by their squared gradient magnitude, scaled to a mean of 1, when weigh_by_contrast
-// (else 1 each).
+// fit, weighed by PolishPointWeight.
 std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera,
                                   const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
-                                  double search_px, const HiddenTest& hidden, bool weigh_by_contrast,
+                                  double search_px, const HiddenTest& hidden, double weigh_above,
                                   int* edges_with_points) {
   const Eigen::Matrix3d K = camera.K();
   const Intrinsics& k = camera.intrinsics();
@@ -62,33 +61,34 @@ std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera,
           Eigen::Vector2d((distorted.x() - k.cx) / k.fx, (distorted.y() - k.cy) / k.fy), x.head<2>() / x.z());
       if (!ideal) continue;
       const Eigen::Vector2d p(k.fx * ideal->x() + k.cx, k.fy * ideal->y() + k.cy);
-      const double magnitude = edge_map.magnitude.at<float>(edge->y, edge->x);
-      out.push_back({e, p, p, weigh_by_contrast ? magnitude * magnitude : 1.0});
+      out.push_back(
+          {e, p, p, PolishPointWeight(edge_map.magnitude.at<float>(edge->y, edge->x), weigh_above)});
       ++found;
     }
     if (found >= kMinPointsPerEdge) ++*edges_with_points;
-  }
-  if (weigh_by_contrast && !out.empty()) {
-    double sum = 0;
-    for (const LineMatch& m : out) sum += m.weight;
-    const double mean = sum / static_cast<double>(out.size());
-    for (LineMatch& m : out) m.weight = mean > 0 ? m.weight / mean : 1.0;
   }
   return out;
 }
 
 }  // namespace
 
+double PolishPointWeight(double magnitude, double weigh_above) {
+  constexpr double kMaxWeight = 4;
+  if (!(weigh_above > 0) || !(magnitude > weigh_above)) return 1;
+  const double r = magnitude / weigh_above;
+  return std::min(r * r, kMaxWeight);
+}
+
 PolishResult PolishPose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                         const EdgeMap& edge_map, bool on_plane, double search_px, const HiddenTest& hidden,
-                        bool weigh_by_contrast) {
+                        double weigh_above) {
   PolishResult out;
   const Eigen::Matrix3d K = camera.K();
   geometry::Pose3 pose = camera_T_object;
   std::vector<LineMatch> points;
   for (int round = 0; round < kRounds; ++round) {
     int edges = 0;
-    points = EdgePoints(model, camera, pose, edge_map, search_px, hidden, weigh_by_contrast, &edges);
+    points = EdgePoints(model, camera, pose, edge_map, search_px, hidden, weigh_above, &edges);
     if (edges < kMinEdges) return out;
     const RobustLoss loss{RobustLoss::Kind::kTukey, kTukeyPx};
     out.fit = on_plane ? FitPoseOnPlane(model.box_size_m, K, camera.camera_T_world(), pose, points, kIterations, loss)

@@ -282,12 +282,22 @@ TEST(PoseFitTest, EachMatchPullsByItsWeight) {
   EXPECT_NEAR(error_deg[true], 0.5, 0.1);
 }
 
-// The editor's polish weighs each edge point by its squared gradient magnitude (weigh_by_contrast):
-// the far half of the bar's longest outline edge is moved out to a border 0 px out at the edge's
-// middle and 2.5 px out at its end (a wedge of the face's own grey), once against the table (crisp)
-// and once against a band 15 grey levels darker than the face (faint). Weighed, the crisp border
-// pulls the polished pose and the faint one hardly does, so the two poses differ; unweighed, both
-// borders' points count alike and the poses agree.
+TEST(PoseFitTest, PolishPointsWeighByTheirSquaredGradientMagnitudeUpToFour) {
+  EXPECT_EQ(PolishPointWeight(40, 80), 1);
+  EXPECT_EQ(PolishPointWeight(80, 80), 1);
+  EXPECT_DOUBLE_EQ(PolishPointWeight(120, 80), 2.25);
+  EXPECT_EQ(PolishPointWeight(160, 80), 4);
+  EXPECT_EQ(PolishPointWeight(1000, 80), 4);  // a shadow's crisp border pulls no more than any crisp edge
+  EXPECT_EQ(PolishPointWeight(1000, 0), 1);   // unweighed
+}
+
+// The editor's polish weighs a crisp edge's points more than a faint one's (weigh_above: twice Canny's
+// high threshold, as the editor's): the far half of the bar's longest outline edge is moved out to a
+// border 0 px out at the edge's middle and 1.5 px out at its end (a wedge of the face's own grey;
+// its corners on whole pixels), once against the table (crisp) and once against a band 15 grey
+// levels darker than the face (faint). Weighed, the crisp border pulls the polished pose more than
+// the faint one, so the two poses differ; unweighed, both borders' points count alike and the poses
+// agree.
 TEST(PoseFitTest, PolishWeighsEdgePointsByTheirContrast) {
   const Camera camera = SyntheticCamera();
   const Model bar = Bar();
@@ -295,7 +305,7 @@ TEST(PoseFitTest, PolishWeighsEdgePointsByTheirContrast) {
   const std::optional<OutlineEdge> edge = LongestOutlineEdge(camera, bar, truth);
   ASSERT_TRUE(edge);
   ASSERT_GT(edge->length, 80);
-  const Eigen::Vector2d middle = 0.5 * (edge->a + edge->b), tilted_end = edge->b + 2.5 * edge->out;
+  const Eigen::Vector2d middle = 0.5 * (edge->a + edge->b), tilted_end = edge->b + 1.5 * edge->out;
   const cv::Mat clean = RenderBoxes(camera, {{bar.box_size_m, truth}}, 13);
   const Eigen::Vector2d inside = middle - 4 * edge->out;
   const int face =
@@ -309,8 +319,9 @@ TEST(PoseFitTest, PolishWeighsEdgePointsByTheirContrast) {
     Paint(image, {middle, tilted_end, edge->b}, face);
     const LineDetection detection = DetectLinesAndEdges(image, camera, RecognizerOptions());
     for (const bool weighed : {false, true}) {
-      const PolishResult polished = PolishPose(bar, camera, camera.camera_T_world() * truth,
-                                               detection.edge_map, true, 3, HiddenTest{}, weighed);
+      const PolishResult polished =
+          PolishPose(bar, camera, camera.camera_T_world() * truth, detection.edge_map, true, 3, HiddenTest{},
+                     weighed ? 2 * RecognizerOptions().canny_high : 0);
       ASSERT_TRUE(polished.ok) << faint << weighed;
       polished_pose[faint][weighed] = camera.world_T_camera() * polished.fit.camera_T_object;
       EXPECT_LT((polished_pose[faint][weighed].translation - truth.translation).norm(), 0.0003)
@@ -320,8 +331,8 @@ TEST(PoseFitTest, PolishWeighsEdgePointsByTheirContrast) {
   const auto turn_deg = [&](bool weighed) {
     return geometry::RotationAngle(polished_pose[false][weighed], polished_pose[true][weighed]) * 180 / M_PI;
   };
-  EXPECT_GT(turn_deg(true), 0.05);
-  EXPECT_LT(turn_deg(false), 0.2 * turn_deg(true));
+  EXPECT_GT(turn_deg(true), 0.02);                   // 0.035 deg
+  EXPECT_LT(turn_deg(false), 0.3 * turn_deg(true));  // 0.007 deg
 }
 
 // Verification's edge-point refit: from a pose 1.2 mm and 1 deg off (as a line fit pulled by a grain

@@ -186,11 +186,13 @@ HypothesisFit FitIndexHypothesis(const Model& model, const Eigen::Matrix3d& K, c
 // distances to the predicted edges, on the support plane (x, y, yaw: FitPoseOnPlane) when on_plane,
 // else in 6 DOF (which drifts along the camera ray on the dev set: not used there). Lines pick up a
 // grain line or shadow beside an edge, and a fragmented edge's pieces weigh by their count; edge
-// points near the predicted outline do neither. With weigh_by_contrast (the editor's polish on the
-// table), each point weighs by its squared gradient magnitude: a point's sub-pixel position varies
-// as the image noise over its gradient, so a faint edge (two faces lit alike, a face against a
-// table of its own shade, a soft shadow's border) pulls less than a crisp one (on seeds 7-41 of
-// `teachsim bench recognize`, rotation p90 0.51 -> 0.46 deg over 6479 found blocks). Not polished
+// points near the predicted outline do neither. With weigh_above > 0 (the editor's polish on the
+// table: twice RecognizerOptions::canny_high), a point whose Sobel gradient magnitude m exceeds it
+// weighs (m / weigh_above)^2, at most 4, the others 1: a point's sub-pixel position varies as the
+// image noise over its gradient, so a crisp edge pulls more than a faint one (two faces lit alike,
+// a face against a table of its own shade). Unbounded m^2 weights let a shadow's crisp border beside
+// a thin plate's faint edge pull it 1.4 mm off (`teachsim bench demo`); these do not (seeds 7-41 of
+// `teachsim bench recognize`: rotation p90 0.51 -> 0.45 deg over 6479 found blocks). Not polished
 // (ok false) when fewer than 3 edges have 4 points or the fit moves the projected vertices by
 // more than 2 px on average.
 struct PolishResult {
@@ -205,7 +207,10 @@ struct PolishResult {
 using HiddenTest = std::function<bool(const Eigen::Vector3d& point_in_camera)>;
 PolishResult PolishPose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                         const EdgeMap& edge_map, bool on_plane, double search_px = 3,
-                        const HiddenTest& hidden = {}, bool weigh_by_contrast = false);
+                        const HiddenTest& hidden = {}, double weigh_above = 0);
+// An edge point's weight in PolishPose: 1, or (magnitude / weigh_above)^2 up to 4 when its gradient
+// magnitude is above weigh_above (> 0).
+double PolishPointWeight(double magnitude, double weigh_above);
 
 // The world extent of a set of points (a recognition's box, a fixed part; at least one point), m.
 geometry::Aabb ExtentOf(const std::vector<Eigen::Vector3d>& points);
