@@ -1,6 +1,7 @@
 // The accepted pose polished on the image's own edge points (see PolishPose in
 // recognition_stages.h): the line fit's matches can include a grain line or a shadow beside an
-// edge; the Canny points nearest the predicted outline, each weighed once, do not.
+// edge; the Canny points nearest the predicted outline do not. Each point counts once, however the
+// edge's lines are fragmented, weighed by its contrast only (PolishPointWeight).
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
