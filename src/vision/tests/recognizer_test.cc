@@ -155,7 +155,7 @@ TEST(PoseFitTest, PolishOnEdgePointsRecoversAPoseOnTheTable) {
 }
 
 // A box's longest projected outline edge: its ends a, b (px) and the unit normal pointing out of the
-// box; nullopt when a corner is behind the camera.
+// box; nullopt when a corner or the centre does not project.
 struct OutlineEdge {
   Eigen::Vector2d a = Eigen::Vector2d::Zero(), b = Eigen::Vector2d::Zero(), out = Eigen::Vector2d::Zero();
   double length = 0;
@@ -174,10 +174,11 @@ std::optional<OutlineEdge> LongestOutlineEdge(const Camera& camera, const Model&
     if (!p || !q) return std::nullopt;
     if ((*q - *p).norm() > edge.length) edge.length = (*q - *p).norm(), edge.a = *p, edge.b = *q;
   }
-  const Eigen::Vector2d along = (edge.b - edge.a).normalized(),
-                        centre = *camera.Project(world_T_object.translation);
+  const auto centre = camera.Project(world_T_object.translation);
+  if (!centre) return std::nullopt;
+  const Eigen::Vector2d along = (edge.b - edge.a).normalized();
   edge.out = Eigen::Vector2d(-along.y(), along.x());
-  if (edge.out.dot(edge.a - centre) < 0) edge.out = -edge.out;
+  if (edge.out.dot(edge.a - *centre) < 0) edge.out = -edge.out;
   return edge;
 }
 
