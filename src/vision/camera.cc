@@ -1,6 +1,8 @@
 #include "teachsim/vision/camera.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 namespace teachsim::vision {
@@ -38,6 +40,26 @@ Camera::Camera(const Intrinsics& intrinsics, const Distortion& distortion,
       width_(width),
       height_(height) {
   TEACHSIM_CHECK(intrinsics.fx > 0 && intrinsics.fy > 0 && width > 0 && height > 0);
+  // The view (SegmentInView): the picture [-0.5, width - 0.5) x [-0.5, height - 0.5) in distorted
+  // normalized coordinates, grown by half its size on every side (undistortion moves the picture's
+  // border outwards under barrel distortion: by a fifth at k1 = -0.25 in its corners).
+  const Eigen::Vector2d lo((-0.5 - intrinsics.cx) / intrinsics.fx, (-0.5 - intrinsics.cy) / intrinsics.fy);
+  const Eigen::Vector2d hi((width - 0.5 - intrinsics.cx) / intrinsics.fx,
+                           (height - 0.5 - intrinsics.cy) / intrinsics.fy);
+  view_lo_ = lo - 0.5 * (hi - lo);
+  view_hi_ = hi + 0.5 * (hi - lo);
+  // The first radius at which the radial term r (1 + k1 r^2 + k2 r^4 + k3 r^6) stops growing (its
+  // derivative 1 + 3 k1 r^2 + 5 k2 r^4 + 7 k3 r^6 reaches 0), looked for out to r = 10 in steps of
+  // 0.001; the view keeps within 0.98 of it.
+  const Distortion& d = distortion_;
+  view_radius_ = std::numeric_limits<double>::infinity();
+  for (int i = 1; i <= 10000; ++i) {
+    const double r2 = 1e-6 * i * i;
+    if (1 + r2 * (3 * d.k1 + r2 * (5 * d.k2 + r2 * 7 * d.k3)) <= 0) {
+      view_radius_ = 0.98 * std::sqrt(r2);
+      break;
+    }
+  }
 }
 
 scene::CameraSpec Camera::ToSpec(const std::string& name) const {
@@ -159,6 +181,60 @@ std::optional<Eigen::Vector2d> Camera::ProjectFromCamera(const Eigen::Vector3d& 
 
 std::optional<Eigen::Vector2d> Camera::Project(const Eigen::Vector3d& p_in_world, double min_depth_m) const {
   return ProjectFromCamera(camera_T_world_ * p_in_world, min_depth_m);
+}
+
+std::optional<std::pair<double, double>> Camera::SegmentInView(const Eigen::Vector3d& p,
+                                                               const Eigen::Vector3d& q,
+                                                               double min_depth_m) const {
+  // Liang-Barsky: each bound is a half-space f(point) <= 0, linear in t along the segment.
+  double t0 = 0, t1 = 1;
+  auto clip = [&](double fp, double fq) {
+    if (fp <= 0 && fq <= 0) return true;
+    if (fp > 0 && fq > 0) return false;
+    const double t = fp / (fp - fq);
+    if (fp > 0) {
+      t0 = std::max(t0, t);
+    } else {
+      t1 = std::min(t1, t);
+    }
+    return t0 <= t1;
+  };
+  // z > min_depth_m (at the clipped end z equals it up to rounding: a hair inside is asked for).
+  const double depth = min_depth_m * (1 + 1e-9) + 1e-12;
+  if (!(clip(depth - p.z(), depth - q.z()) &&
+        clip(p.x() - view_hi_.x() * p.z(), q.x() - view_hi_.x() * q.z()) &&
+        clip(view_lo_.x() * p.z() - p.x(), view_lo_.x() * q.z() - q.x()) &&
+        clip(p.y() - view_hi_.y() * p.z(), q.y() - view_hi_.y() * q.z()) &&
+        clip(view_lo_.y() * p.z() - p.y(), view_lo_.y() * q.z() - q.y()))) {
+    return std::nullopt;
+  }
+  if (!std::isfinite(view_radius_)) return std::make_pair(t0, t1);
+  // Within the fold radius: x^2 + y^2 <= R^2 z^2, the cone in front of the camera, quadratic in t:
+  // f(t) = a t^2 + b t + c <= 0. Its intersection with [t0, t1] (where z > 0) is one interval.
+  const Eigen::Vector3d v = q - p;
+  const double r2 = view_radius_ * view_radius_;
+  const double a = v.x() * v.x() + v.y() * v.y() - r2 * v.z() * v.z();
+  const double b = 2 * (p.x() * v.x() + p.y() * v.y() - r2 * p.z() * v.z());
+  const double c = p.x() * p.x() + p.y() * p.y() - r2 * p.z() * p.z();
+  const auto f = [&](double t) { return (a * t + b) * t + c; };
+  const bool in0 = f(t0) <= 0, in1 = f(t1) <= 0;
+  if (in0 && in1) return std::make_pair(t0, t1);
+  const double disc = b * b - 4 * a * c;
+  if (!(disc >= 0) || a == 0) {
+    if (a != 0 || b == 0 || (!in0 && !in1)) return std::nullopt;
+    const double t = -c / b;  // f linear: one end in, one out
+    return in0 ? std::make_pair(t0, std::min(t1, t)) : std::make_pair(std::max(t0, t), t1);
+  }
+  // The roots, the smaller first; with one end in, the root between the ends is the boundary.
+  const double sq = std::sqrt(disc);
+  const double h = -0.5 * (b + (b >= 0 ? sq : -sq));
+  double r_lo = h / a, r_hi = h != 0 ? c / h : r_lo;
+  if (r_lo > r_hi) std::swap(r_lo, r_hi);
+  const auto between = [&](double t) { return t > t0 && t < t1; };
+  if (in0) return std::make_pair(t0, between(r_lo) ? r_lo : r_hi);
+  if (in1) return std::make_pair(between(r_hi) ? r_hi : r_lo, t1);
+  if (a > 0 && r_lo >= t0 && r_hi <= t1) return std::make_pair(r_lo, r_hi);
+  return std::nullopt;
 }
 
 std::optional<Eigen::Vector3d> Camera::UnprojectToCamera(const Eigen::Vector2d& pixel) const {

@@ -43,8 +43,12 @@ std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera,
     const int n = static_cast<int>(length_px / kSpacingPx);
     if (n < kMinPointsPerEdge) continue;
     int found = 0;
+    const auto in_view =
+        camera.SegmentInView(a, b);  // beyond it the lens model may fold a point into the picture
+    if (!in_view) continue;
     for (int i = 0; i < n; ++i) {
       const double t = kCornerMargin + (1 - 2 * kCornerMargin) * (i + 0.5) / n;
+      if (t < in_view->first || t > in_view->second) continue;
       const Eigen::Vector3d x = a + t * (b - a);
       if (hidden && hidden(x)) continue;
       const auto here = camera.ProjectFromCamera(x, 0.05);

@@ -184,5 +184,60 @@ TEST(CameraTest, UndistortRefusesPointsBeyondTheFold) {
   EXPECT_FALSE(camera.Undistort(Eigen::Vector2d(rd_peak * 1.1, 0)).has_value());
 }
 
+TEST(CameraTest, SegmentInViewHoldsWhatThePictureShows) {
+  const Camera camera = StrongDistortionCamera();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0, 639), v(0, 479), depth(0.2, 2), far(-30, 30);
+  int clipped = 0;
+  for (int i = 0; i < 2000; ++i) {
+    // A point the picture shows, joined to a point anywhere (behind the camera too).
+    const auto ray = camera.UnprojectToCamera({u(rng), v(rng)});
+    if (!ray) continue;
+    const Eigen::Vector3d p = depth(rng) * *ray;
+    const Eigen::Vector3d q(far(rng), far(rng), far(rng));
+    const auto range = camera.SegmentInView(p, q);
+    ASSERT_TRUE(range.has_value());
+    EXPECT_EQ(range->first, 0);  // the end in the picture is in view
+    ASSERT_LE(range->first, range->second);
+    ASSERT_LE(range->second, 1);
+    // The part in view is in front and within a picture and a half of the image: nowhere near the
+    // millions of pixels a point next to the camera plane projects to.
+    for (double s : {0.0, 0.5, 1.0}) {
+      const Eigen::Vector3d x = p + (range->first + s * (range->second - range->first)) * (q - p);
+      ASSERT_GT(x.z(), 0);
+      const auto px = camera.ProjectFromCamera(x);
+      ASSERT_TRUE(px.has_value());
+      EXPECT_LT(std::abs(px->x() - 320), 1000);
+      EXPECT_LT(std::abs(px->y() - 240), 800);
+    }
+    clipped += range->second < 1 ? 1 : 0;
+  }
+  EXPECT_GT(clipped, 1500);  // most far ends lie outside the view
+  // A segment wholly in view is kept whole, exactly.
+  const auto whole = camera.SegmentInView({-0.05, 0.02, 0.5}, {0.04, -0.03, 0.7});
+  ASSERT_TRUE(whole.has_value());
+  EXPECT_EQ(whole->first, 0);
+  EXPECT_EQ(whole->second, 1);
+  // Behind the camera, or beside it, none is.
+  EXPECT_FALSE(camera.SegmentInView({0, 0, -0.5}, {0.1, 0, -0.2}).has_value());
+  EXPECT_FALSE(camera.SegmentInView({5, 0, 0.5}, {6, 0.1, 0.5}).has_value());
+}
+
+TEST(CameraTest, SegmentInViewLeavesOutWhatTheLensModelFoldsIntoThePicture) {
+  // k1 = -0.4: r_d = r (1 - 0.4 r^2) peaks at r = 0.91, and a point at r = 1.8 (61 deg off the axis)
+  // "projects" to x = 320 - 0.53 * 500 = 54 px, inside the picture, mirrored.
+  const Camera camera({500, 500, 320, 240}, {-0.4, 0, 0, 0, 0}, geometry::Pose3::Identity(), 640, 480);
+  const Eigen::Vector3d folded(1.8, 0, 1);
+  const auto px = camera.ProjectFromCamera(folded);
+  ASSERT_TRUE(px.has_value());
+  ASSERT_TRUE(camera.InImage(*px));
+  EXPECT_FALSE(camera.SegmentInView(folded, folded + Eigen::Vector3d(0, 0.01, 0)).has_value());
+  // A segment from the axis out past the fold is cut at 0.98 of the fold's radius.
+  const auto range = camera.SegmentInView({0, 0, 1}, {2, 0, 1});
+  ASSERT_TRUE(range.has_value());
+  EXPECT_EQ(range->first, 0);
+  EXPECT_NEAR(2 * range->second, 0.98 / std::sqrt(1.2), 2e-3);
+}
+
 }  // namespace
 }  // namespace teachsim::vision

@@ -1090,6 +1090,44 @@ TEST(VerificationTest, TheEvidenceScoreSeparatesTheTruePoseFromWrongOnes) {
               truth, moved, crossing);
 }
 
+// The evidence samples only the outline in the camera's view (Camera::SegmentInView). With a lens
+// that folds (k1 = -0.4), a bar 60 deg off the axis "projects" mirrored into the picture, onto a
+// checkerboard's edges: it must gather no evidence there. And a bar with a corner 0.1 mm in front of
+// the camera plane (its edges project millions of pixels long) is sampled over its part in view only:
+// a few thousand samples at most, not billions (the occlusion pass once took 3.7 s on such a pose).
+TEST(VerificationTest, TheOutlineOutsideTheCamerasViewIsNotSampled) {
+  const Camera camera({500, 500, 319.5, 239.5}, {-0.4, 0, 0, 0, 0}, geometry::Pose3::Identity(), 640, 480);
+  cv::Mat board(camera.height(), camera.width(), CV_8U);
+  for (int y = 0; y < board.rows; ++y) {
+    for (int x = 0; x < board.cols; ++x) board.at<uint8_t>(y, x) = ((x / 8 + y / 8) % 2) ? 200 : 60;
+  }
+  const RecognizerOptions options;
+  const LineDetection detection = DetectLinesAndEdges(board, camera, options);
+  const Model bar = Bar();
+  const geometry::Pose3 beside = geometry::Pose3::FromAxisAngle(Eigen::Vector3d(0.3, 1, 0.1).normalized(),
+                                                                0.7, Eigen::Vector3d(0.9, 0.05, 0.5));
+  ASSERT_TRUE(camera.InImage(*camera.ProjectFromCamera(beside.translation)));  // folded into the picture
+  const PoseEvidence folded = EvaluatePose(bar, camera, beside, detection, options);
+  EXPECT_EQ(folded.supported_px, 0);
+  EXPECT_EQ(folded.edges_visible, 0);
+
+  // A corner at z = 0.1 mm: the bar's centre a little deeper, turned so that one corner nears the
+  // camera plane.
+  const Eigen::Vector3d half = 0.5 * bar.box_size_m;
+  const geometry::Pose3 turned =
+      geometry::Pose3::FromAxisAngle(Eigen::Vector3d(1, 2, 0.5).normalized(), 0.9, Eigen::Vector3d::Zero());
+  double nearest = 1e9;
+  for (int v = 0; v < 8; ++v) nearest = std::min(nearest, (turned * BoxVertex(bar.box_size_m, v)).z());
+  geometry::Pose3 straddling = turned;
+  straddling.translation = Eigen::Vector3d(0.004, -0.003, 1e-4 - nearest);
+  ASSERT_LT(half.norm(), 0.06);
+  const PoseEvidence near = EvaluatePose(bar, camera, straddling, detection, options);
+  EXPECT_LT(near.supported_px, 2.5 * 5000);
+  EXPECT_GT(near.supported_px, 0);  // the part in view lies on the board's edges
+  std::printf("evidence outside the view: folded %.0f px, next to the camera plane %.0f px supported\n",
+              folded.supported_px, near.supported_px);
+}
+
 // The step rule: along a rendered block's outline the grey level steps from one surface to the
 // next; along the same outline drawn as thin dark lines on a plain grey table (wood grain, a
 // scratch) the edges are there but no step. Verification rejects the thin-line pose (min_step_share),

@@ -12,6 +12,7 @@
 
 #include <Eigen/Core>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "teachsim/base/status.h"
@@ -87,6 +88,19 @@ class Camera {
                                                    double min_depth_m = 1e-6) const;
   std::optional<Eigen::Vector2d> Project(const Eigen::Vector3d& p_in_world, double min_depth_m = 1e-6) const;
 
+  // The view: the normalized coordinates where the lens model is trusted to image a point on or
+  // near the picture. It is the picture's extent before the lens, grown by half the picture on every
+  // side, and within 0.98 of the radius at which the radial polynomial stops growing: beyond that
+  // radius the model folds points far outside the field of view back into the picture. Fixed at
+  // construction.
+  // The part of the segment p -> q (camera frame) in front of the camera (z > min_depth_m) and in
+  // the view: [t0, t1] along p + t (q - p), exactly [0, 1] when all of it is, nullopt when none is.
+  // For samplers along projected edges: a box corner next to the camera plane projects millions of
+  // pixels away, and an edge sampled every few pixels from there would take seconds.
+  std::optional<std::pair<double, double>> SegmentInView(const Eigen::Vector3d& p_in_camera,
+                                                         const Eigen::Vector3d& q_in_camera,
+                                                         double min_depth_m = 1e-6) const;
+
   // The ray through a pixel (unprojection); nullopt where undistortion fails.
   std::optional<Ray> Unproject(const Eigen::Vector2d& pixel) const;
   // The same as a direction in the camera frame with z = 1: (x, y, 1).
@@ -105,6 +119,8 @@ class Camera {
   Distortion distortion_;
   geometry::Pose3 world_T_camera_, camera_T_world_;
   int width_ = 0, height_ = 0;
+  Eigen::Vector2d view_lo_, view_hi_;  // SegmentInView's box, normalized coordinates
+  double view_radius_ = 0;             // ... and its radius (infinite without a fold)
 };
 
 // The undistorted line through two normalized points as (a, b, c) with a x + b y + c = 0 and
