@@ -23,15 +23,18 @@ double Cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x()
 Eigen::Vector2d End(const ImageLine& l, int end) { return end == 0 ? l.a : l.b; }
 
 // Edge support before any fit: sample points along the visible predicted edges (projected with the
-// lens, straight between the projected vertices) with a Canny edge pixel within 2 px across whose
-// gradient is across the edge, over all sample points inside the image. 0 as soon as `min_score`
-// cannot be reached any more (most poses are wrong; the exact score of those is never used).
+// lens, straight between the projected vertices, or the ends of an edge's part in view) with a
+// Canny edge pixel within 2 px across whose gradient is across the edge, over all sample points
+// inside the image. 0 as soon as `min_score` cannot be reached any more (most poses are wrong; the
+// exact score of those is never used).
 double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const geometry::Pose3& camera_T_object,
                     const EdgeMap& edge_map, double spacing_px, double min_score) {
   const uint16_t visible = VisibleBoxEdges(size_m, camera_T_object.Inverse().translation);
+  Eigen::Vector3d vertex[8];
   Eigen::Vector2d px[8];
   for (int i = 0; i < 8; ++i) {
-    const auto p = camera.ProjectFromCamera(camera_T_object * BoxVertex(size_m, i), 0.05);
+    vertex[i] = camera_T_object * BoxVertex(size_m, i);
+    const auto p = camera.ProjectFromCamera(vertex[i], 0.05);
     if (!p) return 0;
     px[i] = *p;
   }
@@ -42,7 +45,19 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
   samples.clear();
   for (int e = 0; e < 12; ++e) {
     if (!(visible >> e & 1)) continue;
-    const Eigen::Vector2d a = px[kBoxEdges[static_cast<size_t>(e)][0]], b = px[kBoxEdges[static_cast<size_t>(e)][1]];
+    const int i0 = kBoxEdges[static_cast<size_t>(e)][0], i1 = kBoxEdges[static_cast<size_t>(e)][1];
+    Eigen::Vector2d a = px[i0], b = px[i1];
+    // An edge leaving the camera's view is sampled between its ends in view (Camera::SegmentInView:
+    // beyond, the lens model folds far-off points into the picture).
+    const auto in_view = camera.SegmentInView(vertex[i0], vertex[i1]);
+    if (!in_view) continue;
+    if (in_view->first != 0 || in_view->second != 1) {
+      const auto pa = camera.ProjectFromCamera(vertex[i0] + in_view->first * (vertex[i1] - vertex[i0]));
+      const auto pb = camera.ProjectFromCamera(vertex[i0] + in_view->second * (vertex[i1] - vertex[i0]));
+      if (!pa || !pb) continue;
+      a = *pa;
+      b = *pb;
+    }
     const double length = (b - a).norm();
     if (length < 3) continue;
     const Eigen::Vector2d along = (b - a) / length, normal(-along.y(), along.x());
