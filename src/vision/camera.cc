@@ -42,7 +42,7 @@ Camera::Camera(const Intrinsics& intrinsics, const Distortion& distortion,
   TEACHSIM_CHECK(intrinsics.fx > 0 && intrinsics.fy > 0 && width > 0 && height > 0);
   // The view (SegmentInView): the picture [-0.5, width - 0.5) x [-0.5, height - 0.5) in distorted
   // normalized coordinates, grown by half its size on every side (undistortion moves the picture's
-  // border outwards under barrel distortion: by a fifth at k1 = -0.25 in its corners).
+  // border outwards under barrel distortion: by a tenth in its corners at k1 = -0.25).
   const Eigen::Vector2d lo((-0.5 - intrinsics.cx) / intrinsics.fx, (-0.5 - intrinsics.cy) / intrinsics.fy);
   const Eigen::Vector2d hi((width - 0.5 - intrinsics.cx) / intrinsics.fx,
                            (height - 0.5 - intrinsics.cy) / intrinsics.fy);

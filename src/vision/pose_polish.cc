@@ -43,8 +43,8 @@ std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera,
     const int n = static_cast<int>(length_px / kSpacingPx);
     if (n < kMinPointsPerEdge) continue;
     int found = 0;
-    const auto in_view =
-        camera.SegmentInView(a, b);  // beyond it the lens model may fold a point into the picture
+    // Beyond the camera's view the lens model may fold a point into the picture.
+    const auto in_view = camera.SegmentInView(a, b);
     if (!in_view) continue;
     for (int i = 0; i < n; ++i) {
       const double t = kCornerMargin + (1 - 2 * kCornerMargin) * (i + 0.5) / n;
