@@ -103,6 +103,7 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(fraction("occlusion_min_hidden_share", occlusion_min_hidden_share));
   TEACHSIM_RETURN_IF_ERROR(fraction("occlusion_min_shown_share", occlusion_min_shown_share));
   TEACHSIM_RETURN_IF_ERROR(fraction("occlusion_min_evidence_score", occlusion_min_evidence_score));
+  TEACHSIM_RETURN_IF_ERROR(fraction("matched_share_rescue_score", matched_share_rescue_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_score", min_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_coverage", min_coverage));
   if (!(min_edge_contrast >= 0)) return Status::InvalidInput("RecognizerOptions::min_edge_contrast must be >= 0");
@@ -1100,14 +1101,21 @@ void RecognitionPass::Verify(int model_index, FitResult fit, RecognitionTrace::F
   };
   EdgeMatchSet set =
       MatchEdges(model, K_, fit.camera_T_object, lines_, options_.match_distance_px, match_angle_);
-  if (!EnoughMatched(model, set, fit.camera_T_object)) {
-    reject(Outcome::kMatchedFraction);
-    return;
+  // Short of the matched share, a pose is judged on its evidence only with the rescue on
+  // (RecognizerOptions::matched_share_rescue_score); whatever turns it down, it stays a
+  // matched-share rejection.
+  const bool enough_matched = EnoughMatched(model, set, fit.camera_T_object);
+  if (!enough_matched && !options_.matched_share_rescue) return reject(Outcome::kMatchedFraction);
+  if (Implausible(model, fit.camera_T_object)) {
+    return reject(enough_matched ? Outcome::kImplausible : Outcome::kMatchedFraction);
   }
-  if (Implausible(model, fit.camera_T_object)) return reject(Outcome::kImplausible);
   PoseEvidence evidence =
       ComputeEvidence(model, camera_, fit.camera_T_object, detection_, &fixed_edges_, options_, set);
   Outcome outcome = Judge(evidence, options_, &fit.rms_px);
+  if (!enough_matched &&
+      (outcome != Outcome::kCandidate || EvidenceScore(evidence) < options_.matched_share_rescue_score)) {
+    return reject(Outcome::kMatchedFraction);
+  }
   double rank_score = -1;  // set by the refit
   // A second chance, the edge-point refit (RecognizerOptions::edge_point_refit), for a pose whose
   // matched lines are off its predicted edges: often a grain line or a shadow beside an edge was

@@ -25,14 +25,15 @@
 // corner's support hypotheses skipped once a candidate of any model matched its segments),
 // matched-whole-edges (the matched share of the whole visible edges, the parts outside the image
 // included) and matchedinimage-X (the share of the outline inside the image from which the matched
-// share is of that part only), no-occlusion (no second judgement of poses that accepted recognitions
-// partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits), refitrms-PX, refitcoverage-X,
-// refitscore-X, refitinimage-X (the edge-point refit's limits; no-refit switches it off), balance-N (the
-// non-maximum suppression's pairwise margin; 0: off), ownlead-N and rankshare-X (its second way to replace a
-// rival; ownlead-0: off), inimagelead-X and tieshare-X (its third way, where neither own outline shows;
-// inimagelead-0: off), centreslack-MM (how far beyond its supports' tops an off-table recognition's centre
-// may lie). For teachsim, every scored object is put down to the stage that lost it (vision::ClassifyLoss),
-// per visible-fraction bin.
+// share is of that part only), no-rescue and rescue-X (poses short of the matched share turned down
+// unjudged; the evidence score that accepts them), no-occlusion (no second judgement of poses that
+// accepted recognitions partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits), refitrms-PX,
+// refitcoverage-X, refitscore-X, refitinimage-X (the edge-point refit's limits; no-refit switches it off),
+// balance-N (the non-maximum suppression's pairwise margin; 0: off), ownlead-N and rankshare-X (its second
+// way to replace a rival; ownlead-0: off), inimagelead-X and tieshare-X (its third way, where neither own
+// outline shows; inimagelead-0: off), centreslack-MM (how far beyond its supports' tops an off-table
+// recognition's centre may lie). For teachsim, every scored object is put down to the stage that lost it
+// (vision::ClassifyLoss), per visible-fraction bin.
 #include <time.h>
 
 #include <algorithm>
@@ -495,6 +496,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "skip-any-claim") return o->skip_corners_claimed_by_any_model = true, std::nullopt;
   if (a == "matched-whole-edges") return o->matched_share_in_image = false, std::nullopt;
   if (a == "no-occlusion") return o->occlusion_reverify = false, std::nullopt;
+  if (a == "no-rescue") return o->matched_share_rescue = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
   const std::size_t dash = a.rfind('-');
   const std::string name = dash == std::string::npos ? a : a.substr(0, dash);
@@ -529,6 +531,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"hiddenmin", [o](double v) { o->occlusion_min_hidden_share = v; }},
       {"shownmin", [o](double v) { o->occlusion_min_shown_share = v; }},
       {"hiddenscore", [o](double v) { o->occlusion_min_evidence_score = v; }},
+      {"rescue", [o](double v) { o->matched_share_rescue_score = v; }},
 
       {"refitrms", [o](double v) { o->refit_max_rms_px = v; }},
       {"refitcoverage", [o](double v) { o->refit_min_coverage = v; }},
@@ -544,7 +547,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, no-refit, skip-any-claim, "
-           "matched-whole-edges, "
+           "matched-whole-edges, no-occlusion, no-rescue, rescue-X, "
            "rules-only, index-N, "
            "support-N, "
            "contrast-X, "
