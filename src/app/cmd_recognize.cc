@@ -1,7 +1,7 @@
 // teachsim recognize: the blocks in one camera image, by model-based recognition (paper §4; issue 7).
 //
 //   teachsim recognize --image IMG.png --camera CAMERA.json --models MODELS.json [--out RESULT.json]
-//                      [--scene SCENE.json] [--cache DIR]
+//                      [--scene SCENE.json] [--cache DIR] [--overlay OVERLAY.png]
 //
 // RESULT.json is described in docs/formats/recognize.md. Exit status 0 done (even when nothing is
 // recognized: that is an outcome, reported), 2 bad input.
@@ -14,14 +14,16 @@
 #include "teachsim/geometry/pose.h"
 #include "teachsim/scene/scene.h"
 #include "teachsim/vision/camera.h"
+#include "teachsim/vision/overlay.h"
 #include "teachsim/vision/recognizer.h"
+#include "teachsim/worksite/render.h"
 
 namespace teachsim::app {
 
 namespace {
 
 struct RecognizeArgs {
-  std::string image, camera, models, out, scene, cache;
+  std::string image, camera, models, out, scene, cache, overlay;
 };
 
 json::Json PoseJson(const geometry::Pose3& pose) { return geometry::WritePose(pose); }
@@ -86,6 +88,11 @@ int RunRecognize(const RecognizeArgs& a) {
     json::Json document = {{"objects", objects}, {"timing_ms", timing}};
     if (Status s = json::WriteJsonFile(a.out, document); !s.ok()) return ReportError(s);
   }
+  if (!a.overlay.empty()) {
+    auto drawn = vision::DrawRecognitions(image, *camera, *models, result->objects);
+    if (!drawn.ok()) return ReportError(drawn.status().WithPrefix(a.overlay));
+    if (Status s = worksite::WritePng(a.overlay, *drawn); !s.ok()) return ReportError(s);
+  }
   return 0;
 }
 
@@ -101,6 +108,8 @@ void AddRecognizeCommand(CLI::App& app, Runner* run) {
   sub->add_option("--out", args->out, "RESULT.json to write (docs/formats/recognize.md)");
   sub->add_option("--scene", args->scene, "a scene whose fixed objects (table, frame) the model editor uses");
   sub->add_option("--cache", args->cache, "folder for the model-view index (rebuilt when the models change)");
+  sub->add_option("--overlay", args->overlay,
+                  "OVERLAY.png to write: the image with each recognition's outline and \"#i model score\"");
   sub->callback([args, run] { *run = [args] { return RunRecognize(*args); }; });
 }
 

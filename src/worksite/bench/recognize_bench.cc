@@ -55,6 +55,7 @@
 #include "linemod_peer.h"
 #include "teachsim/base/bench_registry.h"
 #include "teachsim/vision/evaluate.h"
+#include "teachsim/vision/overlay.h"
 #include "teachsim/vision/recognition_stages.h"
 #include "teachsim/vision/recognizer.h"
 #include "teachsim/worksite/render.h"
@@ -326,21 +327,10 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
   const auto identity = [](const Eigen::Vector2d& p) { return cv::Point2d(p.x(), p.y()); };
   auto draw_into = [&](cv::Mat& image, const auto& at, const std::string& model,
                        const geometry::Pose3& world_T_object, const cv::Scalar& colour) {
-    const Eigen::Vector3d size = sizes.at(model);
-    const geometry::Pose3 camera_T_object = camera.camera_T_world() * world_T_object;
-    const std::uint16_t visible = vision::VisibleBoxEdges(size, camera_T_object.Inverse().translation);
-    for (int e = 0; e < 12; ++e) {
-      if ((visible >> e & 1) == 0) continue;
-      const Eigen::Vector3d a =
-          camera_T_object * vision::BoxVertex(size, vision::kBoxEdges[static_cast<std::size_t>(e)][0]);
-      const Eigen::Vector3d b =
-          camera_T_object * vision::BoxVertex(size, vision::kBoxEdges[static_cast<std::size_t>(e)][1]);
-      std::optional<Eigen::Vector2d> prev;
-      for (int i = 0; i <= 10; ++i) {
-        const auto p = camera.ProjectFromCamera(a + (b - a) * (i / 10.0));
-        if (p && prev) cv::line(image, at(*prev), at(*p), colour, 1, cv::LINE_AA);
-        prev = p;
-      }
+    for (const std::vector<Eigen::Vector2d>& line :
+         vision::BoxOutlineInImage(sizes.at(model), camera, camera.camera_T_world() * world_T_object)) {
+      for (std::size_t k = 1; k < line.size(); ++k)
+        cv::line(image, at(line[k - 1]), at(line[k]), colour, 1, cv::LINE_AA);
     }
   };
   auto draw = [&](const std::string& model, const geometry::Pose3& world_T_object, const cv::Scalar& colour) {
