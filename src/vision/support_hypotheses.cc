@@ -9,6 +9,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <optional>
 #include <vector>
 
@@ -217,6 +218,27 @@ int VerticalArm(const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
   return cos_angle > 0 ? 1 : -1;
 }
 
+bool PlaceSet::Insert(int model, const geometry::Pose3& pose) {
+  const Eigen::Vector3d& t = pose.translation;
+  std::vector<Eigen::Quaterniond>& rotations =
+      places_[{model, std::llround(t.x() * 1e6), std::llround(t.y() * 1e6), std::llround(t.z() * 1e6)}];
+  for (const Eigen::Quaterniond& q : rotations) {
+    if (SymmetricRotationAngle(models_.models[static_cast<size_t>(model)], geometry::Pose3(q, t), pose) <
+        1e-6) {
+      return false;
+    }
+  }
+  rotations.push_back(pose.rotation);
+  return true;
+}
+
+size_t PlaceSet::PlaceHash::operator()(const Place& p) const {
+  size_t h = std::hash<long long>()(p.x);
+  for (long long v : {p.y, p.z, static_cast<long long>(p.model)})
+    h = h * 1000003u ^ std::hash<long long>()(v);
+  return h;
+}
+
 std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, const Camera& camera,
                                                  const LineDetection& detection,
                                                  const std::vector<ImageCorner>& corners,
@@ -268,6 +290,7 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
   }
 
   std::vector<SupportHypothesis> all;
+  PlaceSet scored(models);  // a placement tried before is not scored again (PlaceSet)
   // The box with its corner at `corner`, its axis i along u_i (unit, horizontal), j along u_j and
   // the up axis rising (bottom corner) or falling (top corner) from the corner.
   auto emit = [&](const Resting& r, int i, int j, const Eigen::Vector3d& corner, const Eigen::Vector3d& u_i,
@@ -287,7 +310,7 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     h.model = r.model;
     h.world_T_object = geometry::Pose3(Eigen::Quaterniond(rotation).normalized(), middle);
     const geometry::Pose3 camera_T_object = camera_T_world * h.world_T_object;
-    if (!(camera_T_object.translation.z() > 0.05)) return;
+    if (!(camera_T_object.translation.z() > 0.05) || !scored.Insert(r.model, h.world_T_object)) return;
     h.score = PlacementSupport(s, camera, camera_T_object, detection.edge_map, options);
     if (h.score < 0) return;
     h.corner = corner_index;
@@ -396,6 +419,7 @@ std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models,
   const Eigen::Vector3d bottom_centre =
       world_T_object.translation - Eigen::Vector3d::UnitZ() * 0.5 * size[up];
   const geometry::Pose3& camera_T_world = camera.camera_T_world();
+  PlaceSet scored(models);
   for (size_t m = 0; m < models.models.size(); ++m) {
     const Eigen::Vector3d& s = models.models[m].box_size_m;
     std::vector<SupportHypothesis> placements;  // of this model, in the order tried
@@ -422,7 +446,8 @@ std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models,
           }
           const geometry::Pose3 pose(Eigen::Quaterniond(rotation).normalized(), centre);
           const geometry::Pose3 camera_T_object = camera_T_world * pose;
-          if (!(camera_T_object.translation.z() > 0.05)) continue;
+          if (!(camera_T_object.translation.z() > 0.05) || !scored.Insert(static_cast<int>(m), pose))
+            continue;
           const double score = PlacementSupport(s, camera, camera_T_object, detection.edge_map, options);
           if (score < 0) continue;
           SupportHypothesis placement;

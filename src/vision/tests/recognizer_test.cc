@@ -921,6 +921,31 @@ TEST(RecognizerTest, AlternativesAreFittedUnlessSwitchedOff) {
 // The support hypotheses at a corner that a candidate has claimed: skipped only for that candidate's
 // own model. A lone bar: once it is a candidate, the cube's hypotheses at its corners are still
 // fitted (they compete in the selection, which keeps the bar); with claims by any model they are not.
+TEST(PlaceSetTest, TheSameBoxIsScoredOnceWhateverItsAxes) {
+  const ModelLibrary models{{{"cube45", Eigen::Vector3d::Constant(0.045)}, {"bar90", {0.09, 0.045, 0.045}}}};
+  PlaceSet places(models);
+  const Eigen::Vector3d centre(0.031, -0.052, 0.0225);
+  const Eigen::Quaterniond yaw(Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ()));
+  EXPECT_TRUE(places.Insert(1, {yaw, centre}));
+  EXPECT_FALSE(places.Insert(1, {yaw, centre}));
+  // The bar turned half a turn about its long axis, or about the vertical: the same box.
+  EXPECT_FALSE(places.Insert(
+      1, {yaw * Eigen::Quaterniond(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX())), centre}));
+  EXPECT_FALSE(places.Insert(
+      1, {yaw * Eigen::Quaterniond(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ())), centre}));
+  // A quarter turn about the vertical puts its long side across: another box; for the cube, the same.
+  const Eigen::Quaterniond quarter =
+      yaw * Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()));
+  EXPECT_TRUE(places.Insert(1, {quarter, centre}));
+  EXPECT_TRUE(places.Insert(0, {yaw, centre}));
+  EXPECT_FALSE(places.Insert(0, {quarter, centre}));
+  // Another model, a tenth of a degree, or a few micrometres away: other placements.
+  EXPECT_TRUE(places.Insert(
+      1, {yaw * Eigen::Quaterniond(Eigen::AngleAxisd(0.1 * M_PI / 180, Eigen::Vector3d::UnitZ())), centre}));
+  EXPECT_TRUE(places.Insert(1, {yaw, centre + Eigen::Vector3d(3e-6, 0, 0)}));
+  EXPECT_FALSE(places.Insert(1, {yaw, centre + Eigen::Vector3d(3e-6, 0, 0)}));
+}
+
 TEST(RecognizerTest, ACornerClaimedByOneModelIsStillFittedWithTheOthers) {
   const Camera camera = SyntheticCamera();
   const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0.04, -0.03, 0.5);
