@@ -26,10 +26,12 @@ grep -q '"model": *"cube45"' "$work/result.json" || fail "the cube in the frame 
 [ "$(head -c 8 "$work/overlay.png" | od -An -c | tr -d ' \n')" = '211PNG\r\n032\n' ] || fail "overlay.png is not a PNG"
 grep -q 'objects;' "$work/out.txt" || fail "no summary line"
 
-# 2. The overlay into a folder that does not exist: status 2, the path named, no RESULT.json left
-#    half-written beside it.
-run 2 --overlay "$work/missing/overlay.png"
+# 2. The overlay into a folder that does not exist: status 2, the folder named; RESULT.json, asked
+#    for too, written whole (it is written first), and no temporary file left behind.
+run 2 --out "$work/result2.json" --overlay "$work/missing/overlay.png"
 grep -q "$work/missing" "$work/out.txt" || fail "the overlay's folder is not named: $(cat "$work/out.txt")"
+grep -q '"timing_ms"' "$work/result2.json" || fail "result2.json is not whole"
+[ -z "$(ls -A "$work" | grep -v -e '^cache$' -e '\.json$' -e '\.png$' -e '^out\.txt$')" ] || fail "stray files: $(ls -A "$work")"
 
 # 3. A malformed camera file: status 2, the file named; nothing written.
 printf '{"width": 640, "height": 480, "fx": "wide"' > "$work/bad_camera.json"
