@@ -24,8 +24,9 @@ std::vector<std::vector<Eigen::Vector2d>> BoxOutlineInImage(const Eigen::Vector3
 
 // The grey camera image (CV_8UC1, the camera's size) in colour with each recognition's outline at
 // its pose after the model editor (a colour per object, 2 px wide) and a label "#i model score" at
-// its centre, i being its index in `objects` (as in RESULT.json). Recognitions of a model not in
-// `models` are labelled only. Fails on an empty image or one of another size or type.
+// its centre (none when the centre is outside the picture), i being its index in `objects` (as in
+// RESULT.json). Recognitions of a model not in `models` are labelled only. Fails on an empty image or
+// one of another size or type.
 [[nodiscard]] Result<cv::Mat> DrawRecognitions(const cv::Mat& image, const Camera& camera,
                                                const ModelLibrary& models,
                                                const std::vector<Recognition>& objects);

@@ -314,7 +314,7 @@ class SegmentClaims {
   std::vector<std::vector<int>> models_;  // per segment
 };
 
-// The placements scored so far, by model and centre (to the micrometre), so that the same box is
+// The placements scored so far, by model and centre (its micrometre cell), so that the same box is
 // scored once (SupportHypotheses, AlternativeHypotheses). Three image lines meeting give three
 // corners that share arms, and a box whose two horizontal sides are equal gives each placement twice,
 // the arms' roles swapped (a cube six times among a candidate's alternatives): on the renders of
@@ -325,7 +325,9 @@ class PlaceSet {
  public:
   explicit PlaceSet(const ModelLibrary& models) : models_(models) {}
   // Adds the box of `model` at `pose`; false when it was there already, up to the box's symmetries
-  // (SymmetricRotationAngle under 1e-6 rad, the centre within a micrometre).
+  // (SymmetricRotationAngle under 1e-6 rad, the centre rounded to the same micrometre in x, y and z;
+  // two centres a fraction of a micrometre apart across a rounding boundary count as two boxes, which
+  // costs a repeat's score and nothing else).
   bool Insert(int model, const geometry::Pose3& pose);
 
  private:
