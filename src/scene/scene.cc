@@ -152,7 +152,7 @@ Json WriteShapeSpec(const ShapeSpec& spec) {
 
 CameraSpec ReadCamera(const Reader& c) {
   c.RejectUnknownKeys({"name", "width", "height", "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3",
-                       "position", "quaternion_wxyz", "convention"});
+                       "gamma", "position", "quaternion_wxyz", "convention"});
   CameraSpec camera;
   camera.name = c.Has("name") ? c.At("name").NonEmptyString() : "camera";
   camera.width = static_cast<int>(c.At("width").IntegerInRange(16, 16384));
@@ -166,6 +166,8 @@ CameraSpec ReadCamera(const Reader& c) {
   camera.p1 = c.At("p1").NumberInRange(-1.0, 1.0);
   camera.p2 = c.At("p2").NumberInRange(-1.0, 1.0);
   camera.k3 = c.At("k3").NumberInRange(-1000.0, 1000.0);
+  if (c.Has("gamma"))
+    camera.gamma = c.At("gamma").NumberInRange(0.5, 4.0);  // vision::Camera::kMinGamma, kMaxGamma
   // The pose fields sit directly in the camera entry (world_T_camera).
   Json pose{{"position", c.At("position").raw()}, {"quaternion_wxyz", c.At("quaternion_wxyz").raw()}};
   try {
@@ -178,10 +180,22 @@ CameraSpec ReadCamera(const Reader& c) {
 
 Json WriteCamera(const CameraSpec& camera) {
   Json pose = geometry::WritePose(camera.world_T_camera);
-  return {{"name", camera.name}, {"width", camera.width}, {"height", camera.height}, {"fx", camera.fx},
-          {"fy", camera.fy},     {"cx", camera.cx},       {"cy", camera.cy},         {"k1", camera.k1},
-          {"k2", camera.k2},     {"p1", camera.p1},       {"p2", camera.p2},         {"k3", camera.k3},
-          {"position", pose["position"]},               {"quaternion_wxyz", pose["quaternion_wxyz"]}};
+  Json out = {{"name", camera.name},
+              {"width", camera.width},
+              {"height", camera.height},
+              {"fx", camera.fx},
+              {"fy", camera.fy},
+              {"cx", camera.cx},
+              {"cy", camera.cy},
+              {"k1", camera.k1},
+              {"k2", camera.k2},
+              {"p1", camera.p1},
+              {"p2", camera.p2},
+              {"k3", camera.k3},
+              {"position", pose["position"]},
+              {"quaternion_wxyz", pose["quaternion_wxyz"]}};
+  if (camera.gamma != 1.0) out["gamma"] = camera.gamma;  // a linear camera's files stay as they were
+  return out;
 }
 
 Result<CameraSpec> LoadCamera(const std::string& path) {

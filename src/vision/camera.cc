@@ -27,8 +27,19 @@ Result<Camera> Camera::FromSpec(const scene::CameraSpec& spec) {
   if (!spec.world_T_camera.IsValid()) {
     return Status::InvalidInput(where + ": pose must be finite with a unit quaternion");
   }
-  return Camera({spec.fx, spec.fy, spec.cx, spec.cy}, {spec.k1, spec.k2, spec.p1, spec.p2, spec.k3},
+  if (!(spec.gamma >= kMinGamma && spec.gamma <= kMaxGamma)) {
+    return Status::InvalidInput(where + ": gamma must be in [" + json::FormatNumber(kMinGamma) + ", " +
+                                json::FormatNumber(kMaxGamma) + "], got " + json::FormatNumber(spec.gamma));
+  }
+  Camera camera({spec.fx, spec.fy, spec.cx, spec.cy}, {spec.k1, spec.k2, spec.p1, spec.p2, spec.k3},
                 spec.world_T_camera, spec.width, spec.height);
+  camera.set_gamma(spec.gamma);
+  return camera;
+}
+
+void Camera::set_gamma(double gamma) {
+  TEACHSIM_CHECK(gamma >= kMinGamma && gamma <= kMaxGamma);
+  gamma_ = gamma;
 }
 
 Camera::Camera(const Intrinsics& intrinsics, const Distortion& distortion,
@@ -76,6 +87,7 @@ scene::CameraSpec Camera::ToSpec(const std::string& name) const {
   spec.p1 = distortion_.p1;
   spec.p2 = distortion_.p2;
   spec.k3 = distortion_.k3;
+  spec.gamma = gamma_;
   spec.world_T_camera = world_T_camera_;
   return spec;
 }

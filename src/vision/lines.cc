@@ -2,15 +2,15 @@
 // pixel along an edge"): Canny edges, located to sub-pixel precision along the gradient, linked into
 // chains, undistorted, split Ramer-style and fitted by least squares.
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <opencv2/imgproc.hpp>
 
-#include "teachsim/vision/recognition_stages.h"
-
 #include "sampling.h"
+#include "teachsim/vision/recognition_stages.h"
 
 namespace teachsim::vision {
 
@@ -163,6 +163,25 @@ std::vector<ImageLine> MergeCollinear(std::vector<ImageLine> lines) {
   return out;
 }
 
+// The gradient magnitude of 255 (g / 255)^gamma: the grey levels g brought back to linear light,
+// in the same units, through the same Gaussian and Sobel as the lines'.
+cv::Mat LinearMagnitude(const cv::Mat& image_gray8, double gamma) {
+  std::array<float, 256> to_linear;
+  for (int g = 0; g < 256; ++g) to_linear[g] = static_cast<float>(255.0 * std::pow(g / 255.0, gamma));
+  cv::Mat linear(image_gray8.size(), CV_32F);
+  for (int y = 0; y < image_gray8.rows; ++y) {
+    const uint8_t* in = image_gray8.ptr<uint8_t>(y);
+    float* row = linear.ptr<float>(y);
+    for (int x = 0; x < image_gray8.cols; ++x) row[x] = to_linear[in[x]];
+  }
+  cv::Mat blurred, dx, dy, magnitude;
+  cv::GaussianBlur(linear, blurred, cv::Size(5, 5), 1.0);
+  cv::Sobel(blurred, dx, CV_32F, 1, 0, 3);
+  cv::Sobel(blurred, dy, CV_32F, 0, 1, 3);
+  cv::magnitude(dx, dy, magnitude);
+  return magnitude;
+}
+
 }  // namespace
 
 LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& camera,
@@ -204,6 +223,8 @@ LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& came
   dy.convertTo(fdy, CV_32F);
   cv::magnitude(fdx, fdy, magnitude);
   out.edge_map.magnitude = magnitude;
+  out.edge_map.linear_magnitude =
+      camera.gamma() == 1.0 ? magnitude : LinearMagnitude(image_gray8, camera.gamma());
   out.edge_map.gradient = cv::Mat::zeros(image_gray8.size(), CV_32FC2);
 
   const Intrinsics& k = camera.intrinsics();

@@ -60,7 +60,7 @@ std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera,
       const Eigen::Vector2d distorted =
           Eigen::Vector2d(edge->x, edge->y) +
           Eigen::Vector2d(edge->gx, edge->gy) *
-              internal::SubPixelEdgeOffset(edge_map.magnitude, edge->x, edge->y, edge->gx, edge->gy);
+              internal::SubPixelEdgeOffset(edge_map.linear_magnitude, edge->x, edge->y, edge->gx, edge->gy);
       // Undistorted, starting from the predicted point's ideal coordinates.
       const auto ideal = camera.Undistort(
           Eigen::Vector2d((distorted.x() - k.cx) / k.fx, (distorted.y() - k.cy) / k.fy), x.head<2>() / x.z());

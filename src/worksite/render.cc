@@ -237,11 +237,21 @@ Prepared Prepare(const std::vector<RenderObject>& objects, const vision::Camera&
 }
 
 // Optics and sensor: gain, blur, Gaussian noise from the seed, rounding to 8 bits.
-cv::Mat Expose(const cv::Mat& radiance, const RenderOptions& options, std::uint64_t seed) {
+// `gamma` is the camera's response (vision::Camera::gamma): the light, blended and blurred
+// linearly, is encoded as 255 (E / 255)^(1 / gamma) before the sensor noise.
+cv::Mat Expose(const cv::Mat& radiance, const RenderOptions& options, double gamma, std::uint64_t seed) {
   cv::Mat gray = radiance * options.gain;
   if (options.blur_sigma_px > 0) {
     cv::GaussianBlur(gray, gray, cv::Size(0, 0), options.blur_sigma_px, options.blur_sigma_px,
                      cv::BORDER_REFLECT);
+  }
+  if (gamma != 1.0) {
+    const float exponent = static_cast<float>(1.0 / gamma);
+    for (int v = 0; v < gray.rows; ++v) {
+      float* row = gray.ptr<float>(v);
+      for (int u = 0; u < gray.cols; ++u)
+        row[u] = 255.0f * std::pow(std::clamp(row[u] / 255.0f, 0.0f, 1.0f), exponent);
+    }
   }
   cv::Mat image(radiance.rows, radiance.cols, CV_8UC1);
   SplitMix64 rng{seed};
@@ -561,7 +571,7 @@ RenderResult Renderer::Render(const std::vector<RenderObject>& objects, std::uin
     }
   }
 
-  result.image = Expose(radiance, options_, seed);
+  result.image = Expose(radiance, options_, camera_.gamma(), seed);
 
   // --- Truth: visible pixels and visible fraction per object.
   std::vector<int> visible(static_cast<std::size_t>(num_objects), 0);

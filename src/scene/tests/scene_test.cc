@@ -75,18 +75,22 @@ TEST_P(MalformedScene, ErrorNamesFilePathAndProblem) {
 INSTANTIATE_TEST_SUITE_P(
     EachField, MalformedScene,
     ::testing::Values(
-        Case{"syntax", "{\"objects\": [", "x.json: line 1, column 13: syntax error while parsing value - unexpected end of input; expected '[', '{', or a literal"},
+        Case{"syntax", "{\"objects\": [",
+             "x.json: line 1, column 13: syntax error while parsing value - unexpected end of input; "
+             "expected '[', '{', or a literal"},
         Case{"no_objects", "{}", "x.json: objects: missing"},
         Case{"objects_not_array", "{\"objects\": 3}", "x.json: objects: must be an array, got number"},
         Case{"negative_box",
              OBJ("{\"name\": \"b\", \"fixed\": true, \"shape\": {\"box\": [0.1, -0.02, 0.1]}, \"pose\": "
                  "{\"position\": [0, 0, 0], \"quaternion_wxyz\": [1, 0, 0, 0]}}"),
              "x.json: objects[0].shape.box[1]: must be > 0, got -0.02"},
-        Case{"box_size", OBJ("{\"name\": \"b\", \"fixed\": true, \"shape\": {\"box\": [0.1, 0.1]}, \"pose\": "
-                             "{\"position\": [0, 0, 0], \"quaternion_wxyz\": [1, 0, 0, 0]}}"),
+        Case{"box_size",
+             OBJ("{\"name\": \"b\", \"fixed\": true, \"shape\": {\"box\": [0.1, 0.1]}, \"pose\": "
+                 "{\"position\": [0, 0, 0], \"quaternion_wxyz\": [1, 0, 0, 0]}}"),
              "x.json: objects[0].shape.box: must have 3 elements, got 2"},
         Case{"no_name", OBJ("{\"fixed\": true}"), "x.json: objects[0].name: missing"},
-        Case{"empty_name", OBJ("{\"name\": \"\", \"fixed\": true}"), "x.json: objects[0].name: must not be empty"},
+        Case{"empty_name", OBJ("{\"name\": \"\", \"fixed\": true}"),
+             "x.json: objects[0].name: must not be empty"},
         Case{"fixed_string", OBJ("{\"name\": \"b\", \"fixed\": \"yes\"}"),
              "x.json: objects[0].fixed: must be true or false, got string"},
         Case{"unknown_field", OBJ(BLOCK(", \"colour\": 3")),
@@ -95,7 +99,8 @@ INSTANTIATE_TEST_SUITE_P(
              OBJ("{\"name\": \"b\", \"fixed\": true, \"shape\": {\"box\": [1, 1, 1], \"parts\": []}}"),
              "x.json: objects[0].shape: must have exactly one of \"box\", \"convex\", \"parts\""},
         Case{"flat_convex",
-             OBJ("{\"name\": \"b\", \"fixed\": true, \"shape\": {\"convex\": {\"vertices\": [[0,0,0],[1,0,0],[0,1,0],[1,1,0]]}}}"),
+             OBJ("{\"name\": \"b\", \"fixed\": true, \"shape\": {\"convex\": {\"vertices\": "
+                 "[[0,0,0],[1,0,0],[0,1,0],[1,1,0]]}}}"),
              "x.json: objects[0].shape.convex.vertices: the vertices are coplanar: they span no volume"},
         Case{"empty_parts", OBJ("{\"name\": \"b\", \"fixed\": true, \"shape\": {\"parts\": []}}"),
              "x.json: objects[0].shape.parts: must not be empty"},
@@ -110,14 +115,23 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"duplicate_name", OBJ(BLOCK("") "," BLOCK("")),
              "x.json: objects[1].name: duplicate object name 'b'"},
         Case{"camera_fx",
-             "{\"objects\": [], \"cameras\": [{\"name\": \"c\", \"width\": 640, \"height\": 480, \"fx\": -1, \"fy\": 1, "
-             "\"cx\": 1, \"cy\": 1, \"k1\": 0, \"k2\": 0, \"p1\": 0, \"p2\": 0, \"k3\": 0, \"position\": [0,0,1], "
+             "{\"objects\": [], \"cameras\": [{\"name\": \"c\", \"width\": 640, \"height\": 480, \"fx\": -1, "
+             "\"fy\": 1, "
+             "\"cx\": 1, \"cy\": 1, \"k1\": 0, \"k2\": 0, \"p1\": 0, \"p2\": 0, \"k3\": 0, \"position\": "
+             "[0,0,1], "
              "\"quaternion_wxyz\": [1,0,0,0]}]}",
              "x.json: cameras[0].fx: must be > 0, got -1"},
+        Case{"camera_gamma",
+             "{\"objects\": [], \"cameras\": [{\"name\": \"c\", \"width\": 640, \"height\": 480, \"fx\": 1, "
+             "\"fy\": 1, "
+             "\"cx\": 1, \"cy\": 1, \"k1\": 0, \"k2\": 0, \"p1\": 0, \"p2\": 0, \"k3\": 0, \"gamma\": 9, "
+             "\"position\": [0,0,1], \"quaternion_wxyz\": [1,0,0,0]}]}",
+             "x.json: cameras[0].gamma: must be in [0.5, 4], got 9"},
         Case{"camera_width",
              "{\"objects\": [], \"cameras\": [{\"name\": \"c\", \"width\": 6.5, \"height\": 480}]}",
              "x.json: cameras[0].width: must be an integer, got 6.5"},
-        Case{"robot_base", "{\"objects\": [], \"robot\": {\"model\": \"crs_a465\"}}", "x.json: robot.base: missing"}),
+        Case{"robot_base", "{\"objects\": [], \"robot\": {\"model\": \"crs_a465\"}}",
+             "x.json: robot.base: missing"}),
     [](const ::testing::TestParamInfo<Case>& param_info) { return std::string(param_info.param.name); });
 
 TEST(Scene, MissingFileAndFolderAreClearErrors) {

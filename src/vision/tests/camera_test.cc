@@ -51,6 +51,32 @@ TEST(CameraTest, RejectsBadSpecs) {
   spec = PuzzleCamera();
   spec.world_T_camera.rotation.coeffs() *= 2.0;
   EXPECT_FALSE(Camera::FromSpec(spec).ok());
+  spec = PuzzleCamera();
+  spec.gamma = 0;
+  bad = Camera::FromSpec(spec);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("gamma must be in [0.5, 4], got 0"), std::string::npos)
+      << bad.status().message();
+}
+
+// The response: linear unless the camera entry says otherwise; a gamma goes through the camera and
+// back, and only a camera that is not linear writes the field.
+TEST(CameraTest, GammaIsLinearUnlessTheEntrySaysOtherwise) {
+  scene::CameraSpec spec = PuzzleCamera();
+  auto linear = Camera::FromSpec(spec);
+  ASSERT_TRUE(linear.ok());
+  EXPECT_EQ(linear->gamma(), 1.0);
+  EXPECT_FALSE(scene::WriteCamera(linear->ToSpec("main")).contains("gamma"));
+  spec.gamma = 2.2;
+  auto srgb = Camera::FromSpec(spec);
+  ASSERT_TRUE(srgb.ok());
+  EXPECT_EQ(srgb->gamma(), 2.2);
+  const json::Json written = scene::WriteCamera(srgb->ToSpec("main"));
+  EXPECT_EQ(written.at("gamma").get<double>(), 2.2);
+  auto read = json::Decode<scene::CameraSpec>(written, "camera.json",
+                                              [](const json::Reader& r) { return scene::ReadCamera(r); });
+  ASSERT_TRUE(read.ok()) << read.status().message();
+  EXPECT_EQ(read->gamma, 2.2);
 }
 
 TEST(CameraTest, ProjectionMatchesOpenCV) {

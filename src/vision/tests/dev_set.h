@@ -10,6 +10,7 @@
 
 #include "teachsim/base/json.h"
 #include "teachsim/scene/scene.h"
+#include "teachsim/vision/evaluate.h"
 #include "teachsim/vision/recognizer.h"
 
 namespace teachsim::vision::dev {
@@ -68,6 +69,7 @@ inline std::vector<Case> Cases(const json::Json& truth) {
     out.camera.p1 = cam.at("p1").get<double>();
     out.camera.p2 = cam.at("p2").get<double>();
     out.camera.k3 = cam.at("k3").get<double>();
+    out.camera.gamma = kDevSetGamma;
     out.camera.world_T_camera = PoseOf(cam);
     out.fixed_world.objects.push_back(scene::BoxObject("table", true, {1.2, 1.0, 0.05},
                                                        geometry::Pose3::Translation({0, 0, -0.025})));

@@ -164,14 +164,15 @@ TEST(DevSetTest, RecognizesTheBlocksOfTheTwelveImages) {
   // support-plane hypotheses raised it from 21 to 27 of 38 (the index alone fails this threshold),
   // the robust fits to 33, the evidence score to 35 and it took the last false positive away, the
   // lower Canny thresholds to 36. False positives, accuracy in the median and time meet it. Since
-  // the lower thresholds, a few found blocks are 0.6-1.0 deg off in yaw (7 of 38 beyond 0.5 deg,
-  // 3 of 36 before; the polish on the table's edge points does not take it away): the p90 is held
-  // to 1 deg, the largest to 1.5.
+  // the lower thresholds a few found blocks were 0.6-1.0 deg off in yaw, most the same way: the
+  // edge points were placed on the gamma-encoded grey levels. Told the set's gamma (2.2), the
+  // editor's fit places them on the linear light: p90 0.69 -> 0.30 deg, the largest 1.01 -> 0.43
+  // (session 29). The goal, 0.5 deg, holds the p90.
   EXPECT_GE(bins[0].found, static_cast<int>(0.92 * bins[0].objects));
   EXPECT_EQ(false_positives, 0);
   EXPECT_LT(median(rotation_errors_deg), 0.5);
-  EXPECT_LT(percentile(rotation_errors_deg, 0.9), 1.0);
-  EXPECT_LT(max(rotation_errors_deg), 1.5);
+  EXPECT_LT(percentile(rotation_errors_deg, 0.9), 0.5);
+  EXPECT_LT(max(rotation_errors_deg), 0.75);
   EXPECT_LT(median(position_errors_mm), 1.0);
   EXPECT_LT(median(depth_errors_mm), 1.0);
   EXPECT_LT(median(rms_px), 0.5);

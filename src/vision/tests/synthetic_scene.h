@@ -23,12 +23,15 @@ inline Camera SyntheticCamera() {
 }
 
 // Renders boxes as flat-shaded faces (painter's order, farthest first) on a grey table with a
-// little noise: the grey of a face depends on its normal, as under a distant light. Drawn 4x
+// little noise: the grey of a face depends on its normal, as under a distant light (face_grey +
+// face_light * the cosine). Drawn 4x
 // larger and averaged down (area sampling, exact pixel-centre convention).
-inline cv::Mat RenderBoxes(const Camera& camera, const std::vector<std::pair<Eigen::Vector3d, geometry::Pose3>>& boxes,
-                    uint32_t seed) {
+inline cv::Mat RenderBoxes(const Camera& camera,
+                           const std::vector<std::pair<Eigen::Vector3d, geometry::Pose3>>& boxes,
+                           uint32_t seed, double table_grey = 90, double face_grey = 140,
+                           double face_light = 110) {
   constexpr int kSuper = 4;
-  cv::Mat image(kSuper * camera.height(), kSuper * camera.width(), CV_8U, cv::Scalar(90));
+  cv::Mat image(kSuper * camera.height(), kSuper * camera.width(), CV_8U, cv::Scalar(table_grey));
   std::vector<std::pair<double, size_t>> order;
   for (size_t i = 0; i < boxes.size(); ++i) {
     order.push_back({-(camera.camera_T_world() * boxes[i].second.translation).z(), i});
@@ -58,7 +61,7 @@ inline cv::Mat RenderBoxes(const Camera& camera, const std::vector<std::pair<Eig
         Eigen::Vector3d normal = Eigen::Vector3d::Zero();
         normal[axis] = s;
         const double shade = std::max(0.0, light.dot(pose.Rotate(normal)));
-        cv::fillConvexPoly(image, polygon, cv::Scalar(140 + 110 * shade), cv::LINE_8, 4);
+        cv::fillConvexPoly(image, polygon, cv::Scalar(face_grey + face_light * shade), cv::LINE_8, 4);
       }
     }
   }

@@ -104,6 +104,7 @@ Result<DataSet> LoadDevSet(const vision::TruthSet& truth, std::size_t max_cases)
     out.image = cv::imread(c.image, cv::IMREAD_GRAYSCALE);
     if (out.image.empty()) return Status::IoError(c.image + ": cannot read the image");
     out.camera = c.camera;
+    out.camera.gamma = vision::kDevSetGamma;
     out.frame = c.frame;
     out.truth = c.objects;
     set.cases.push_back(std::move(out));

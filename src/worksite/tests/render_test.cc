@@ -166,6 +166,35 @@ TEST(RenderTest, SameSeedGivesByteIdenticalImages) {
   EXPECT_EQ(a, d);
 }
 
+// A camera with a gamma: the same light, blended and blurred linearly, written as 255 (E / 255)^(1 /
+// gamma); the same picture otherwise (noise off to compare pixel by pixel).
+TEST(RenderTest, AGammaCameraEncodesTheLinearPicture) {
+  const scene::Scene scene = PuzzleScene();
+  RenderOptions options;
+  options.noise_sigma = 0;
+  vision::Camera srgb = MainCamera(scene);
+  srgb.set_gamma(2.2);
+  auto linear_renderer = Renderer::Create(MainCamera(scene), options);
+  auto srgb_renderer = Renderer::Create(srgb, options);
+  ASSERT_TRUE(linear_renderer.ok() && srgb_renderer.ok());
+  const auto objects = ObjectsFromScene(scene);
+  const RenderResult linear = linear_renderer->Render(objects, 7),
+                     encoded = srgb_renderer->Render(objects, 7);
+  int compared = 0, brighter = 0;
+  for (int v = 0; v < linear.image.rows; ++v) {
+    for (int u = 0; u < linear.image.cols; ++u) {
+      const double g = linear.image.at<std::uint8_t>(v, u);
+      if (g < 10 || g > 250) continue;  // where the encoding's slope makes rounding count
+      const double expected = 255.0 * std::pow(g / 255.0, 1 / 2.2);
+      ASSERT_NEAR(encoded.image.at<std::uint8_t>(v, u), expected, 2.0) << "pixel " << u << ", " << v;
+      ++compared;
+      brighter += encoded.image.at<std::uint8_t>(v, u) > g;
+    }
+  }
+  EXPECT_GT(compared, 200000);
+  EXPECT_EQ(brighter, compared);  // mid greys come out brighter
+}
+
 TEST(RenderTest, VisibleFractionCountsOcclusionAndTheImageBorder) {
   const scene::Scene scene = PuzzleScene();
   const vision::Camera camera = MainCamera(scene);

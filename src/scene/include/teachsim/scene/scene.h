@@ -42,6 +42,9 @@ struct CameraSpec {
   int width = 640, height = 480;            // px
   double fx = 600, fy = 600, cx = 319.5, cy = 239.5;  // px
   double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0;
+  // The response: a pixel's grey level is 255 E^(1 / gamma) for the light E in [0, 1] it gathered.
+  // 1: linear (teachsim's renderer); about 2.2 for an sRGB camera or a POV-Ray PNG.
+  double gamma = 1.0;
   geometry::Pose3 world_T_camera;
 };
 

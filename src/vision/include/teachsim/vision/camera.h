@@ -59,6 +59,10 @@ class Camera {
   int width() const { return width_; }
   int height() const { return height_; }
   Eigen::Matrix3d K() const;
+  // The response (scene::CameraSpec::gamma): grey level 255 E^(1 / gamma) for the light E in [0, 1].
+  double gamma() const { return gamma_; }
+  void set_gamma(double gamma);  // in [kMinGamma, kMaxGamma]
+  static constexpr double kMinGamma = 0.5, kMaxGamma = 4.0;
 
   // True when (u, v) lies on the image: [-0.5, width - 0.5) x [-0.5, height - 0.5).
   bool InImage(const Eigen::Vector2d& pixel) const {  // inline: the recognizer asks it per outline sample
@@ -119,6 +123,7 @@ class Camera {
   Distortion distortion_;
   geometry::Pose3 world_T_camera_, camera_T_world_;
   int width_ = 0, height_ = 0;
+  double gamma_ = 1.0;
   Eigen::Vector2d view_lo_, view_hi_;  // SegmentInView's box, normalized coordinates
   double view_radius_ = 0;             // ... and its radius (infinite without a fold)
 };

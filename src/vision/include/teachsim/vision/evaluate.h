@@ -78,6 +78,12 @@ struct TruthSet {
 // "models" (and its "dims", when given, must equal the model's sizes).
 [[nodiscard]] Result<TruthSet> LoadTruthSet(const std::string& path);
 
+// The response of the dev set's cameras (scene::CameraSpec::gamma), which truth.json does not
+// carry: its PNGs are POV-Ray's, which blends the light of an edge pixel linearly and writes it
+// sRGB-encoded. Measured: on the grey levels, the gradient's peak across the fully visible blocks'
+// edges lies 0.16 px inside the true outline (docs/benchmarks.md, session 26).
+inline constexpr double kDevSetGamma = 2.2;
+
 // The fixed world a recognizer may be told about: a table (top at z = 0) and the frame, if any.
 scene::Scene FixedWorldScene(const std::optional<FrameTruth>& frame);
 

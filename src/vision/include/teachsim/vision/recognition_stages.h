@@ -38,7 +38,12 @@ uint16_t OutlineBoxEdges(const Eigen::Vector3d& size_m, const Eigen::Vector3d& c
 struct EdgeMap {
   cv::Mat edges;      // CV_8U, 255 on Canny edge pixels (distorted image)
   cv::Mat gradient;   // CV_32FC2, unit gradient (x, y) at edge pixels, (0, 0) elsewhere
-  cv::Mat magnitude;  // CV_32F, gradient magnitude (for sub-pixel edge positions)
+  cv::Mat magnitude;  // CV_32F, gradient magnitude (for sub-pixel edge positions of the lines)
+  // CV_32F, the gradient magnitude of the image brought back to linear light (Camera::gamma), for
+  // the sub-pixel positions of the editor's edge points; the same matrix as `magnitude` for a
+  // linear camera. A gamma-encoded camera blends an edge pixel's two sides in linear light, so on
+  // its grey levels the peak sits towards the darker side (0.1-0.2 px at gamma 2.2).
+  cv::Mat linear_magnitude;
   cv::Mat smoothed;   // CV_8U, the image after the Gaussian (contrast across predicted edges)
   cv::Mat near;       // CV_8U, one bit per pixel (bit x % 8 of byte x / 8 in row y), set where a Canny edge
                       // pixel lies within kEdgeNearPx in x and y (the edges dilated): a quick "no edge
