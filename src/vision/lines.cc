@@ -2,7 +2,6 @@
 // pixel along an edge"): Canny edges, located to sub-pixel precision along the gradient, linked into
 // chains, undistorted, split Ramer-style and fitted by least squares.
 #include <algorithm>
-#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
@@ -166,14 +165,10 @@ std::vector<ImageLine> MergeCollinear(std::vector<ImageLine> lines) {
 // The gradient magnitude of 255 (g / 255)^gamma: the grey levels g brought back to linear light,
 // in the same units, through the same Gaussian and Sobel as the lines'.
 cv::Mat LinearMagnitude(const cv::Mat& image_gray8, double gamma) {
-  std::array<float, 256> to_linear;
-  for (int g = 0; g < 256; ++g) to_linear[g] = static_cast<float>(255.0 * std::pow(g / 255.0, gamma));
-  cv::Mat linear(image_gray8.size(), CV_32F);
-  for (int y = 0; y < image_gray8.rows; ++y) {
-    const uint8_t* in = image_gray8.ptr<uint8_t>(y);
-    float* row = linear.ptr<float>(y);
-    for (int x = 0; x < image_gray8.cols; ++x) row[x] = to_linear[in[x]];
-  }
+  cv::Mat to_linear(1, 256, CV_32F), linear;
+  for (int g = 0; g < 256; ++g)
+    to_linear.at<float>(g) = static_cast<float>(255.0 * std::pow(g / 255.0, gamma));
+  cv::LUT(image_gray8, to_linear, linear);
   cv::Mat blurred, dx, dy, magnitude;
   cv::GaussianBlur(linear, blurred, cv::Size(5, 5), 1.0);
   cv::Sobel(blurred, dx, CV_32F, 1, 0, 3);

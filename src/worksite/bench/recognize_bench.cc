@@ -33,7 +33,9 @@
 // way to replace a rival; ownlead-0: off), inimagelead-X and tieshare-X (its third way, where neither own
 // outline shows; inimagelead-0: off), centreslack-MM (how far beyond its supports' tops an off-table
 // recognition's centre may lie). For teachsim, every scored object is put down to the stage that lost it
-// (vision::ClassifyLoss), per visible-fraction bin.
+// (vision::ClassifyLoss), per visible-fraction bin. TEACHSIM_RECOGNIZE_RENDER_GAMMA=G renders the
+// scenes as a camera of that gamma writes them (scene::CameraSpec::gamma; default 1, linear), and the
+// recognizer is told it.
 #include <time.h>
 
 #include <algorithm>
@@ -158,7 +160,8 @@ double DistanceToRect(const Eigen::Vector2d& p, const Eigen::Vector2d& centre, c
 // one block, at a random sideways offset, so the visible fractions spread over all three bins. Cameras look at
 // the work area from 0.45-0.75 m, 35-70 deg above the table, with varying focal length and
 // radial distortion. Seeded: the same count gives the same images.
-Result<DataSet> MakeRenderedSet(const vision::TruthSet& library, int count, std::uint64_t seed) {
+Result<DataSet> MakeRenderedSet(const vision::TruthSet& library, int count, std::uint64_t seed,
+                                double gamma) {
   DataSet set{"rendered", "teachsim renderer, 640x480, random scenes (seed " + std::to_string(seed) +
                               "), distortion, dark cylinder occluder", {}};
   std::vector<std::string> models;
@@ -175,6 +178,7 @@ Result<DataSet> MakeRenderedSet(const vision::TruthSet& library, int count, std:
     camera.fy = camera.fx * uniform(0.997, 1.003);
     camera.k1 = uniform(-0.25, 0.05);
     camera.k2 = uniform(0.0, 0.02);
+    camera.gamma = gamma;
     const Eigen::Vector3d target(uniform(-0.06, 0.06), uniform(-0.06, 0.06), 0);
     const double distance = uniform(0.45, 0.75), elevation = uniform(35, 70) * kPi / 180, azimuth = uniform(0, 2 * kPi);
     const Eigen::Vector3d eye =
@@ -632,7 +636,13 @@ int Run(const BenchArgs& args) {
   // TEACHSIM_RECOGNIZE_RENDER_SEED: another set of random scenes (default 7, the set the
   // recognizer's thresholds were chosen on; 8 and up are held out to check that they generalise).
   const std::uint64_t render_seed = static_cast<std::uint64_t>(std::atoll(EnvOr("TEACHSIM_RECOGNIZE_RENDER_SEED", "7").c_str()));
-  auto rendered = MakeRenderedSet(*truth, args.quick ? 3 : 60, render_seed);
+  const double render_gamma = std::atof(EnvOr("TEACHSIM_RECOGNIZE_RENDER_GAMMA", "1").c_str());
+  if (!(render_gamma >= vision::Camera::kMinGamma && render_gamma <= vision::Camera::kMaxGamma)) {
+    std::fprintf(stderr, "teachsim: error: TEACHSIM_RECOGNIZE_RENDER_GAMMA must be in [%g, %g]\n",
+                 vision::Camera::kMinGamma, vision::Camera::kMaxGamma);
+    return 2;
+  }
+  auto rendered = MakeRenderedSet(*truth, args.quick ? 3 : 60, render_seed, render_gamma);
   const double render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (!rendered.ok()) {
     std::fprintf(stderr, "teachsim: error: %s\n", rendered.status().message().c_str());
