@@ -152,8 +152,7 @@ int RunExtrinsics(const ExtrinsicsArgs& a) {
         "fitting the pose to the points' model edges (from the PnP pose, camera at (%.1f, %.1f, %.1f) mm):\n",
         first.x() * 1e3, first.y() * 1e3, first.z() * 1e3);
     const cv::Mat gray = cv::imread(a.image, cv::IMREAD_GRAYSCALE);
-    const vision::Camera posed(camera->intrinsics(), camera->distortion(), result->world_T_camera,
-                               camera->width(), camera->height());
+    const vision::Camera posed = camera->WithPose(result->world_T_camera);
     auto fitted = vision::FitPoseToEdges(gray, posed, *points, edge_options, a.click_sigma_px,
                                          [](const std::string& line) { std::printf("  %s\n", line.c_str()); });
     if (!fitted.ok()) return ReportError(fitted.status().WithPrefix(a.points + ": --edge-fit"));

@@ -343,8 +343,7 @@ Result<Eigen::Matrix3d> PositionCovariance(const Camera& camera,
         pose.rotation *
         Eigen::Quaterniond(Eigen::AngleAxisd(
             dw.norm(), dw.norm() > 0 ? Eigen::Vector3d(dw.normalized()) : Eigen::Vector3d::UnitX()));
-    return Camera(camera.intrinsics(), camera.distortion(),
-                  geometry::Pose3(q.normalized(), pose.translation + dp), camera.width(), camera.height());
+    return camera.WithPose(geometry::Pose3(q.normalized(), pose.translation + dp));
   };
   Eigen::MatrixXd jacobian(2 * static_cast<Eigen::Index>(points_in_world.size()), 6);
   for (int k = 0; k < 6; ++k) {
@@ -487,8 +486,7 @@ Result<ExtrinsicsResult> CalibrateExtrinsics(const Camera& camera,
     result = ExtrinsicsResult{};
     result.world_T_camera = camera_T_world.Inverse();
     result.dropped = dropped;
-    const Camera solved(camera.intrinsics(), camera.distortion(), result.world_T_camera, camera.width(),
-                        camera.height());
+    const Camera solved = camera.WithPose(result.world_T_camera);
     double sum = 0;
     int used = 0;
     std::size_t worst = points.size();
@@ -703,8 +701,7 @@ SnapResult SnapToCorner(const cv::Mat& gray, const Camera& camera, const Eigen::
   const int cu = static_cast<int>(std::lround(click.x())), cv_ = static_cast<int>(std::lround(click.y()));
   const cv::Rect roi = cv::Rect(cu - margin, cv_ - margin, 2 * margin + 1, 2 * margin + 1) &
                        cv::Rect(0, 0, gray.cols, gray.rows);
-  cv::Mat patch;
-  gray(roi).convertTo(patch, CV_32F);
+  cv::Mat patch = internal::LinearLight(gray(roi), camera.gamma());
   if (options.smooth_sigma_px > 0) {
     cv::GaussianBlur(patch, patch, cv::Size(0, 0), options.smooth_sigma_px, options.smooth_sigma_px,
                      cv::BORDER_REPLICATE);
@@ -982,8 +979,7 @@ std::vector<SnapResult> SnapCorrespondences(const cv::Mat& gray, const Camera& c
     for (int round = 0; round < 2; ++round) {
       auto pose = CalibrateExtrinsics(camera, current, first);
       if (!pose.ok()) break;
-      const Camera posed(camera.intrinsics(), camera.distortion(), pose->world_T_camera, camera.width(),
-                         camera.height());
+      const Camera posed = camera.WithPose(pose->world_T_camera);
       std::vector<SnapResult> round_results;
       for (std::size_t i = 0; i < clicked.size(); ++i) {
         round_results.push_back(SnapToModelCorner(gray, posed, clicked[i], options));
@@ -1022,7 +1018,7 @@ namespace {
 // world edges are straight lines.
 struct IdealPatch {
   cv::Rect roi;
-  cv::Mat values;                      // CV_32F, the raw gray levels (no smoothing: the fit models the blur)
+  cv::Mat values;  // CV_32F, the gray levels in linear light (no smoothing: the fit models the blur)
   std::vector<Eigen::Vector2d> ideal;  // row-major over roi
 };
 
@@ -1035,7 +1031,7 @@ std::optional<IdealPatch> MakeIdealPatch(const cv::Mat& gray, const Camera& came
   patch.roi = cv::Rect(cu - radius, cv_ - radius, 2 * radius + 1, 2 * radius + 1) &
               cv::Rect(0, 0, gray.cols, gray.rows);
   if (patch.roi.width < 8 || patch.roi.height < 8) return std::nullopt;
-  gray(patch.roi).convertTo(patch.values, CV_32F);
+  patch.values = internal::LinearLight(gray(patch.roi), camera.gamma());
   constexpr int kStep = 4;
   const int gw = patch.roi.width / kStep + 2, gh = patch.roi.height / kStep + 2;
   std::vector<Eigen::Vector2d> grid(static_cast<std::size_t>(gw * gh));
@@ -1631,7 +1627,7 @@ Result<EdgePoseSolution> SolvePoseToEdges(const Camera& camera, const std::vecto
           o.sigma_px;
     }
     if (n_points > 0) {
-      const Camera posed(camera.intrinsics(), camera.distortion(), world_T_camera, camera.width(), camera.height());
+      const Camera posed = camera.WithPose(world_T_camera);
       for (std::size_t i = 0; i < n_points; ++i) {
         auto projected = posed.Project(points[i].p_in_world);
         if (!projected) return false;
@@ -1748,7 +1744,7 @@ Result<EdgePoseSolution> SolvePoseToEdges(const Camera& camera, const std::vecto
     solution.residuals_px.push_back(r(static_cast<Eigen::Index>(i)) * observations[i].sigma_px + offset);
     solution.weights.push_back(w(static_cast<Eigen::Index>(i)));
   }
-  const Camera posed(camera.intrinsics(), camera.distortion(), pose, camera.width(), camera.height());
+  const Camera posed = camera.WithPose(pose);
   for (const PointCorrespondence& p : points) {
     auto projected = posed.Project(p.p_in_world);
     solution.point_residuals_px.push_back(projected ? (*projected - p.pixel).norm() : NAN);
@@ -1862,8 +1858,7 @@ Result<EdgePoseResult> FitPoseToEdges(const cv::Mat& gray, const Camera& camera,
       if (!solved.ok()) return solved.status();
     }
     solution = std::move(*solved);
-    current = Camera(camera.intrinsics(), camera.distortion(), solution.world_T_camera, camera.width(),
-                     camera.height());
+    current = camera.WithPose(solution.world_T_camera);
     if (progress) {
       int used = 0, edges_used = 0;
       double sum2 = 0;

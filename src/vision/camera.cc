@@ -37,6 +37,12 @@ Result<Camera> Camera::FromSpec(const scene::CameraSpec& spec) {
   return camera;
 }
 
+Camera Camera::WithPose(const geometry::Pose3& world_T_camera) const {
+  Camera moved(intrinsics_, distortion_, world_T_camera, width_, height_);
+  moved.gamma_ = gamma_;
+  return moved;
+}
+
 void Camera::set_gamma(double gamma) {
   TEACHSIM_CHECK(gamma >= kMinGamma && gamma <= kMaxGamma);
   gamma_ = gamma;

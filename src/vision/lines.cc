@@ -162,13 +162,10 @@ std::vector<ImageLine> MergeCollinear(std::vector<ImageLine> lines) {
   return out;
 }
 
-// The gradient magnitude of 255 (g / 255)^gamma: the grey levels g brought back to linear light,
-// in the same units, through the same Gaussian and Sobel as the lines'.
+// The gradient magnitude of the image in linear light (internal::LinearLight), through the same
+// Gaussian and Sobel as the lines'.
 cv::Mat LinearMagnitude(const cv::Mat& image_gray8, double gamma) {
-  cv::Mat to_linear(1, 256, CV_32F), linear;
-  for (int g = 0; g < 256; ++g)
-    to_linear.at<float>(g) = static_cast<float>(255.0 * std::pow(g / 255.0, gamma));
-  cv::LUT(image_gray8, to_linear, linear);
+  const cv::Mat linear = internal::LinearLight(image_gray8, gamma);
   cv::Mat blurred, dx, dy, magnitude;
   cv::GaussianBlur(linear, blurred, cv::Size(5, 5), 1.0);
   cv::Sobel(blurred, dx, CV_32F, 1, 0, 3);

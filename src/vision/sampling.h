@@ -3,7 +3,7 @@
 // calibration's corner snapping.
 
 #include <algorithm>
-
+#include <cmath>
 #include <opencv2/core.hpp>
 
 namespace teachsim::vision::internal {
@@ -18,6 +18,22 @@ inline float SampleBilinear(const cv::Mat& m, double x, double y) {
   const float* r1 = m.ptr<float>(y0 + 1);
   return static_cast<float>((1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
                             fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]));
+}
+
+// 8-bit grey levels as CV_32F; for a camera with a gamma (Camera::gamma) brought back to linear
+// light, 255 (g / 255)^gamma, where a blurred step is symmetric: on the encoded levels its middle
+// sits towards the darker side.
+inline cv::Mat LinearLight(const cv::Mat& gray8, double gamma) {
+  cv::Mat values;
+  if (gamma == 1.0) {
+    gray8.convertTo(values, CV_32F);
+    return values;
+  }
+  cv::Mat to_linear(1, 256, CV_32F);
+  for (int g = 0; g < 256; ++g)
+    to_linear.at<float>(g) = static_cast<float>(255.0 * std::pow(g / 255.0, gamma));
+  cv::LUT(gray8, to_linear, values);
+  return values;
 }
 
 // The sub-pixel offset of an edge pixel along its unit gradient (gx, gy): the peak of a parabola

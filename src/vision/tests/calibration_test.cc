@@ -518,7 +518,7 @@ TEST(EdgePoseTest, PoseFromNoiseFreeEdgesIsExact) {
   start.translation += Eigen::Vector3d(0.012, -0.01, 0.013);
   start.rotation = (Eigen::Quaterniond(Eigen::AngleAxisd(0.05, Eigen::Vector3d(1, 2, 3).normalized())) *
                     start.rotation).normalized();
-  const Camera off(truth.intrinsics(), truth.distortion(), start, truth.width(), truth.height());
+  const Camera off = truth.WithPose(start);
   for (const bool use_points : {false, true}) {
     EdgeFitOptions options;
     options.use_points = use_points;

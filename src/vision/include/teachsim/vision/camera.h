@@ -51,6 +51,8 @@ class Camera {
          int width, int height);
 
   scene::CameraSpec ToSpec(const std::string& name) const;
+  // The same camera (lens, size, gamma) at another pose.
+  Camera WithPose(const geometry::Pose3& world_T_camera) const;
 
   const Intrinsics& intrinsics() const { return intrinsics_; }
   const Distortion& distortion() const { return distortion_; }
