@@ -25,6 +25,7 @@ namespace {
 struct IntrinsicsArgs {
   std::string images, board, out, name = "camera";
   double square_m = 0;
+  double gamma = 1.0;  // the camera's response, written into the file (not measured)
   int min_views = 5;
   bool fix_tangential = false;
 };
@@ -59,7 +60,8 @@ int RunIntrinsics(const IntrinsicsArgs& a) {
     std::fprintf(stderr, "teachsim: warning: skipped %s: %s\n", s.path.c_str(), s.reason.c_str());
   }
   const vision::IntrinsicsResult& r = calibration->result;
-  const vision::Camera camera(r.intrinsics, r.distortion, geometry::Pose3::Identity(), r.width, r.height);
+  vision::Camera camera(r.intrinsics, r.distortion, geometry::Pose3::Identity(), r.width, r.height);
+  camera.set_gamma(a.gamma);
   if (Status s = json::WriteJsonFile(a.out, scene::WriteCamera(camera.ToSpec(a.name))); !s.ok()) {
     return ReportError(s);
   }
@@ -228,6 +230,12 @@ void AddCalibrateCommand(CLI::App& app, Runner* run) {
   intr->add_option("--name", in->name, "camera name in the file")->capture_default_str();
   intr->add_option("--min-views", in->min_views, "fewer usable views is an error")->capture_default_str();
   intr->add_flag("--zero-tangential", in->fix_tangential, "fix p1 = p2 = 0");
+  intr->add_option(
+          "--gamma", in->gamma,
+          "the camera's response, written into the file: 1 linear, about 2.2 for most cameras' 8-bit "
+          "(sRGB) images; not measured (docs/formats/camera.md)")
+      ->check(CLI::Range(vision::Camera::kMinGamma, vision::Camera::kMaxGamma))
+      ->capture_default_str();
   intr->callback([in, run] { *run = [in] { return RunIntrinsics(*in); }; });
 
   auto ex = std::make_shared<ExtrinsicsArgs>();

@@ -70,7 +70,7 @@ TEST(CliTest, CalibrateIntrinsicsFromRenderedViews) {
   ASSERT_EQ(Teachsim("render --scene " + kScene + " --out " + dir + "/views/scene.png").status, 0);
   ASSERT_TRUE(cv::imwrite(dir + "/views/zz_small.png", cv::Mat(240, 320, CV_8U, cv::Scalar(128))));
   run = Teachsim("calibrate intrinsics --images " + dir + "/views --board 9x6 --square 0.02 --out " + dir +
-                 "/camera.json --name main");
+                 "/camera.json --name main --gamma 2.2");
   ASSERT_EQ(run.status, 0) << run.err;
   EXPECT_NE(run.err.find("broken.png: cannot read"), std::string::npos) << run.err;
   EXPECT_NE(run.err.find("scene.png: chessboard 9x6 (inner corners) not found"), std::string::npos)
@@ -84,6 +84,13 @@ TEST(CliTest, CalibrateIntrinsicsFromRenderedViews) {
   EXPECT_NEAR(camera->fx / 764.0, 1.0, 0.005);
   EXPECT_NEAR(camera->cx, 319.5, 2.0);
   EXPECT_NEAR(camera->k1, -0.24, 0.02);
+  EXPECT_EQ(camera->gamma, 2.2);  // as told: the chessboard does not measure it
+  // A gamma out of range: status 2, the option named, nothing written.
+  run = Teachsim("calibrate intrinsics --images " + dir + "/views --board 9x6 --square 0.02 --out " + dir +
+                 "/camera_bad.json --gamma 9");
+  EXPECT_EQ(run.status, 2);
+  EXPECT_NE(run.err.find("--gamma"), std::string::npos) << run.err;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/camera_bad.json"));
 
   // Too few views: an error that lists what was skipped.
   const std::string few = Folder("intrinsics_few");

@@ -42,7 +42,7 @@ struct EdgeMap {
   // CV_32F, the gradient magnitude of the image brought back to linear light (Camera::gamma), for
   // the sub-pixel positions of the editor's edge points; the same matrix as `magnitude` for a
   // linear camera. A gamma-encoded camera blends an edge pixel's two sides in linear light, so on
-  // its grey levels the peak sits towards the darker side (0.1-0.2 px at gamma 2.2).
+  // its grey levels the peak sits towards the darker side (0.1-0.3 px at gamma 2.2, with the lens blur).
   cv::Mat linear_magnitude;
   cv::Mat smoothed;   // CV_8U, the image after the Gaussian (contrast across predicted edges)
   cv::Mat near;       // CV_8U, one bit per pixel (bit x % 8 of byte x / 8 in row y), set where a Canny edge
