@@ -123,14 +123,19 @@ std::vector<Eigen::Quaterniond> BoxSymmetries(const Eigen::Vector3d& size_m, dou
 
 double SymmetricRotationError(const Eigen::Quaterniond& world_R_truth, const Eigen::Quaterniond& world_R_estimate,
                               const std::vector<Eigen::Quaterniond>& symmetries) {
-  double best = 3.14159265358979323846;
+  // The smallest angle is the unit quaternion's with the largest |w|; then angle = 2 atan2(|v|, |w|),
+  // exact near 0 and near pi (acos of w is not).
   const Eigen::Quaterniond estimate_R_truth = world_R_estimate.conjugate() * world_R_truth;
+  Eigen::Quaterniond best(0, 1, 0, 0);  // pi
+  double best_w = -1;
   for (const Eigen::Quaterniond& s : symmetries) {
     const Eigen::Quaterniond d = (estimate_R_truth * s).normalized();
-    // angle = 2 atan2(|v|, |w|): exact near 0 and near pi (acos of w is not).
-    best = std::min(best, 2.0 * std::atan2(d.vec().norm(), std::abs(d.w())));
+    if (std::abs(d.w()) > best_w) {
+      best_w = std::abs(d.w());
+      best = d;
+    }
   }
-  return best;
+  return 2.0 * std::atan2(best.vec().norm(), std::abs(best.w()));
 }
 
 PositionError SplitPositionError(const Eigen::Vector3d& truth_in_world, const Eigen::Vector3d& estimate_in_world,
