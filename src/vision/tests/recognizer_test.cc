@@ -14,6 +14,7 @@
 #include "synthetic_scene.h"
 #include "teachsim/geometry/aabb.h"
 #include "teachsim/scene/scene.h"
+#include "teachsim/vision/evaluate.h"
 #include "teachsim/vision/recognition_stages.h"
 
 namespace teachsim::vision {
@@ -486,6 +487,24 @@ TEST(SymmetryTest, PosesEqualUpToTheBoxSymmetry) {
   EXPECT_NEAR(SymmetricRotationAngle(Bar(), a, b), M_PI / 2, 1e-9);  // a bar is not
   const geometry::Pose3 c = OnTable(Bar().box_size_m, 0, 0, 0.2 + M_PI);
   EXPECT_NEAR(SymmetricRotationAngle(Bar(), a, c), 0, 1e-9);  // but turned by 180 deg it is
+}
+
+// SymmetricRotationAngle keeps each size's symmetry group (per thread, at most 64 sizes, then it
+// starts again): every answer is the one the size's own group gives, whatever was asked before.
+TEST(SymmetryTest, EachSizeIsAnsweredWithItsOwnGroup) {
+  const geometry::Pose3 a = OnTable(Cube().box_size_m, 0, 0, 0.2);
+  const geometry::Pose3 quarter = OnTable(Cube().box_size_m, 0, 0, 0.2 + M_PI / 2);
+  for (int k = 0; k < 150; ++k) {
+    // Square in x and y every other size (a quarter turn about z is a symmetry), a bar otherwise.
+    const double side = 0.03 + 0.0005 * (k % 75);
+    const Model box{"box", Eigen::Vector3d(side, k % 2 ? side : 2 * side, 0.05)};
+    const double expected = SymmetricRotationError(
+        quarter.rotation, a.rotation, BoxSymmetries(box.box_size_m, 1e-6 * box.box_size_m.maxCoeff()));
+    EXPECT_NEAR(expected, k % 2 ? 0 : M_PI / 2, 1e-9) << k;
+    EXPECT_EQ(SymmetricRotationAngle(box, a, quarter), expected) << k;
+    EXPECT_NEAR(SymmetricRotationAngle(Cube(), a, quarter), 0, 1e-9) << k;
+    EXPECT_NEAR(SymmetricRotationAngle(Bar(), a, quarter), M_PI / 2, 1e-9) << k;
+  }
 }
 
 TEST(OptionsTest, ValidateNamesTheField) {
