@@ -207,7 +207,10 @@ double SymmetricRotationAngle(const Model& model, const geometry::Pose3& a, cons
   const Eigen::Vector3d& size = model.box_size_m;
   const SizeGroup* group = nullptr;
   for (const SizeGroup& g : groups) {
-    if (g.size == size) group = &g;
+    if (g.size == size) {
+      group = &g;
+      break;
+    }
   }
   if (group == nullptr) {
     if (groups.size() >= 64) groups.clear();
