@@ -309,6 +309,10 @@ double Summary::Recall(VisibilityBin bin) const {
   return objects[i] > 0 ? static_cast<double>(found[i]) / objects[i] : kNaN;
 }
 
+double Summary::RecallUnoccluded() const {
+  return unoccluded_objects > 0 ? static_cast<double>(unoccluded_found) / unoccluded_objects : kNaN;
+}
+
 double Summary::FalsePositivesPerImage() const {
   return images > 0 ? static_cast<double>(false_positives) / images : kNaN;
 }
@@ -319,9 +323,12 @@ void SummaryBuilder::Add(const ImageEvaluation& evaluation, double time_ms) {
   time_ms_.push_back(time_ms);
   for (const ObjectOutcome& o : evaluation.objects) {
     const int bin = static_cast<int>(BinOf(o.visible_fraction));
+    const bool unoccluded = o.visible_fraction >= kUnoccludedFraction;
     ++counts_.objects[bin];
+    counts_.unoccluded_objects += unoccluded ? 1 : 0;
     if (o.detection < 0) continue;
     ++counts_.found[bin];
+    counts_.unoccluded_found += unoccluded ? 1 : 0;
     rotation_deg_.push_back(o.rotation_error_rad * kRadToDeg);
     across_mm_.push_back(o.position_error.across_m * 1e3);
     along_mm_.push_back(o.position_error.along_m * 1e3);
@@ -353,12 +360,20 @@ json::Json SummaryToJson(const Summary& s) {
                             {"recall", std::isfinite(r) ? json::Json(r) : json::Json(nullptr)}};
   }
   const int found = s.found[0] + s.found[1] + s.found[2];
+  const double unoccluded = s.RecallUnoccluded();
   return {{"images", s.images},
           {"recall", recall},
+          {"recall_unoccluded",
+           {{"min_visible_fraction", kUnoccludedFraction},
+            {"objects", s.unoccluded_objects},
+            {"found", s.unoccluded_found},
+            {"recall", std::isfinite(unoccluded) ? json::Json(unoccluded) : json::Json(nullptr)}}},
           {"false_positives", s.false_positives},
-          {"false_positives_per_image", s.images > 0 ? json::Json(s.FalsePositivesPerImage()) : json::Json(nullptr)},
+          {"false_positives_per_image",
+           s.images > 0 ? json::Json(s.FalsePositivesPerImage()) : json::Json(nullptr)},
           {"found_within_goals", s.within_goals},
-          {"found_within_goals_fraction", found > 0 ? json::Json(double(s.within_goals) / found) : json::Json(nullptr)},
+          {"found_within_goals_fraction",
+           found > 0 ? json::Json(double(s.within_goals) / found) : json::Json(nullptr)},
           {"rotation_error_deg", StatsToJson(s.rotation_deg)},
           {"position_error_across_mm", StatsToJson(s.across_mm)},
           {"position_error_along_mm", StatsToJson(s.along_mm)},

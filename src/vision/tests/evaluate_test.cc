@@ -170,6 +170,32 @@ TEST(EvaluateImageTest, HiddenObjectsAreNotScoredAndUnknownModelsFail) {
   EXPECT_FALSE(EvaluateImage(TwoCubesAndASlab(), {}, kSizes, camera, options).ok());
 }
 
+TEST(SummaryTest, UnoccludedObjectsAreCountedApartFromTheHighBin) {
+  // Four objects of the >= 0.7 bin; only the two at most 1 % hidden are unoccluded.
+  ImageEvaluation image;
+  for (const auto& [fraction, detection] :
+       std::vector<std::pair<double, int>>{{1.0, 0}, {0.995, -1}, {0.98, 1}, {0.8, -1}}) {
+    ObjectOutcome o;
+    o.truth = static_cast<int>(image.objects.size());
+    o.visible_fraction = fraction;
+    o.detection = detection;
+    image.objects.push_back(o);
+  }
+  SummaryBuilder builder;
+  builder.Add(image, 1.0);
+  const Summary s = builder.Build();
+  EXPECT_EQ(s.objects[static_cast<int>(VisibilityBin::kHigh)], 4);
+  EXPECT_DOUBLE_EQ(s.Recall(VisibilityBin::kHigh), 0.5);
+  EXPECT_EQ(s.unoccluded_objects, 2);
+  EXPECT_EQ(s.unoccluded_found, 1);
+  EXPECT_DOUBLE_EQ(s.RecallUnoccluded(), 0.5);
+  const json::Json j = SummaryToJson(s);
+  EXPECT_EQ(j["recall_unoccluded"]["objects"], 2);
+  EXPECT_EQ(j["recall_unoccluded"]["found"], 1);
+  EXPECT_DOUBLE_EQ(j["recall_unoccluded"]["min_visible_fraction"].get<double>(), kUnoccludedFraction);
+  EXPECT_TRUE(std::isnan(SummaryBuilder().Build().RecallUnoccluded()));
+}
+
 TEST(SummarizeTest, NearestRankQuantiles) {
   const Stats s = Summarize({5, 1, 4, 2, 3, 6, 7, 8, 9, 10, std::nan("")});
   EXPECT_EQ(s.count, 10);

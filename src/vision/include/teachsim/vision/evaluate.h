@@ -150,6 +150,12 @@ enum class VisibilityBin { kHigh = 0, kMedium = 1, kLow = 2 };
 VisibilityBin BinOf(double visible_fraction);
 const char* BinName(VisibilityBin bin);  // ">=0.7", "0.4-0.7", "<0.4"
 
+// Issue 7 sets three recall goals: >= 98 % for unoccluded objects, >= 90 % with up to 30 % hidden
+// (the >= 0.7 bin) and >= 70 % at half hidden (the 0.4-0.7 bin). Unoccluded is counted apart, as
+// at most 1 % hidden: the dev set's fractions are POV-Ray's samples, and a block that touches
+// another one in the image reads 0.99-0.999 there.
+inline constexpr double kUnoccludedFraction = 0.99;
+
 // The issue's goals for a found object's pose.
 struct PoseGoals {
   double rotation_rad = 0.5 * 3.14159265358979 / 180.0;
@@ -160,11 +166,13 @@ struct Summary {
   int images = 0;
   int objects[3] = {0, 0, 0};  // per VisibilityBin
   int found[3] = {0, 0, 0};
+  int unoccluded_objects = 0, unoccluded_found = 0;  // visible fraction >= kUnoccludedFraction (in kHigh too)
   int false_positives = 0;
   int within_goals = 0;  // found objects whose pose meets every PoseGoals figure
   Stats rotation_deg, across_mm, along_mm, reprojection_rms_px, time_ms;
 
   double Recall(VisibilityBin bin) const;  // NaN when the bin is empty
+  double RecallUnoccluded() const;         // NaN when there is no unoccluded object
   double FalsePositivesPerImage() const;
 };
 
