@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "dev_set.h"
+#include "teachsim/vision/evaluate.h"
 #include "teachsim/vision/recognition_stages.h"
 
 namespace teachsim::vision {
@@ -69,6 +70,7 @@ TEST(DevSetTest, RecognizesTheBlocksOfTheTwelveImages) {
   auto recognizer = Recognizer::Create(models, options, cache);
   ASSERT_TRUE(recognizer.ok()) << recognizer.status().message();
   Bin bins[3];  // >= 0.7, 0.4-0.7, < 0.4
+  Bin unoccluded;  // visible fraction >= kUnoccludedFraction (in bins[0] too)
   int false_positives = 0, images = 0;
   std::vector<double> position_errors_mm, rotation_errors_deg, depth_errors_mm, rms_px, times_ms, raw_position_mm;
   const char* debug_dir = std::getenv("TEACHSIM_VISION_DEBUG_DIR");
@@ -84,7 +86,9 @@ TEST(DevSetTest, RecognizesTheBlocksOfTheTwelveImages) {
     std::vector<bool> used(result->objects.size(), false);
     for (const dev::TrueObject& o : c.objects) {
       Bin& bin = bins[o.visible_fraction >= 0.7 ? 0 : o.visible_fraction >= 0.4 ? 1 : 2];
+      const bool whole = o.visible_fraction >= kUnoccludedFraction;
       ++bin.objects;
+      unoccluded.objects += whole ? 1 : 0;
       const Model& m = *std::find_if(models.models.begin(), models.models.end(),
                                      [&](const Model& x) { return x.name == o.model; });
       for (size_t k = 0; k < result->objects.size(); ++k) {
@@ -95,6 +99,7 @@ TEST(DevSetTest, RecognizesTheBlocksOfTheTwelveImages) {
         if (dp > dev::kMatchPositionM || da > dev::kMatchRotationRad) continue;
         used[k] = true;
         ++bin.found;
+        unoccluded.found += whole ? 1 : 0;
         const Eigen::Vector3d axis = (o.world_T_object.translation - camera->world_T_camera().translation).normalized();
         const Eigen::Vector3d err = r.world_T_object.translation - o.world_T_object.translation;
         position_errors_mm.push_back(1000 * (err - axis * axis.dot(err)).norm());
@@ -149,6 +154,7 @@ TEST(DevSetTest, RecognizesTheBlocksOfTheTwelveImages) {
   for (int b = 0; b < 3; ++b) {
     std::printf("visible %-8s %2d of %2d found\n", names[b], bins[b].found, bins[b].objects);
   }
+  std::printf("unoccluded        %2d of %2d found\n", unoccluded.found, unoccluded.objects);
   std::printf("false positives: %d in %d images\n", false_positives, images);
   std::printf("position across the view: median %.2f mm, max %.2f mm; along the camera axis: median %.2f, max %.2f mm\n",
               median(position_errors_mm), max(position_errors_mm), median(depth_errors_mm), max(depth_errors_mm));
@@ -160,15 +166,20 @@ TEST(DevSetTest, RecognizesTheBlocksOfTheTwelveImages) {
   std::printf("time per image: median %.1f ms, max %.1f ms\n", median(times_ms), max(times_ms));
 
   // Thresholds met on this set (see the report; the goals are higher in places).
-  // Recall is below the goal (98 %) and is the known weakness (see the report); the
-  // support-plane hypotheses raised it from 21 to 27 of 38 (the index alone fails this threshold),
-  // the robust fits to 33, the evidence score to 35 and it took the last false positive away, the
-  // lower Canny thresholds to 36. False positives, accuracy in the median and time meet it. Since
+  // Recall, against the goals of 98 % of the unoccluded blocks and 90 % with up to 30 %
+  // hidden (the >= 0.7 bin): the support-plane hypotheses raised the >= 0.7 bin from 21 to 27 of 38
+  // (the index alone fails this threshold), the robust fits to 33, the evidence score to 35 and it
+  // took the last false positive away, the lower Canny thresholds to 36. Of the 27 unoccluded blocks
+  // 26 are found: case_009's slab, in full view, is missed (its right face is lit like the table;
+  // docs/benchmarks.md, sessions 30-31), one block short of 98 % on this set. False positives,
+  // accuracy in the median and time meet the goals. Since
   // the lower thresholds a few found blocks were 0.6-1.0 deg off in yaw, most the same way: the
   // edge points were placed on the gamma-encoded grey levels. Told the set's gamma (2.2), the
   // editor's fit places them on the linear light: p90 0.69 -> 0.30 deg, the largest 1.01 -> 0.43
   // (session 29). The goal, 0.5 deg, holds the p90.
   EXPECT_GE(bins[0].found, static_cast<int>(0.92 * bins[0].objects));
+  EXPECT_EQ(unoccluded.objects, 27);
+  EXPECT_GE(unoccluded.found, unoccluded.objects - 1);
   EXPECT_EQ(false_positives, 0);
   EXPECT_LT(median(rotation_errors_deg), 0.5);
   EXPECT_LT(percentile(rotation_errors_deg, 0.9), 0.5);
