@@ -3,9 +3,10 @@
 // controlled occlusion (a dark cylinder between the camera and a block), per method on the same
 // images: teachsim's recognizer (after the model editor's rules, and its raw fitted pose), and the
 // peer, OpenCV's LINE-MOD (raw template poses, and refined by the recognizer's own least-squares
-// fit of model edges to image lines). Figures per data set: recall per visible-fraction bin, false
-// positives per image, position error across / along the line of sight, symmetry-aware rotation
-// error, reprojection RMS and time per image (thread CPU time, one OpenCV thread).
+// fit of model edges to image lines). Figures per data set: recall per visible-fraction bin and of
+// the unoccluded blocks (vision::kUnoccludedFraction), false positives per image, position error
+// across / along the line of sight, symmetry-aware rotation error, reprojection RMS and time per
+// image (thread CPU time, one OpenCV thread).
 // Environment: TEACHSIM_HOME (repository), TEACHSIM_SHARED (../shared), TEACHSIM_CACHE_DIR
 // (templates and index; default: bench-cache beside the executable, in the build folder);
 // TEACHSIM_RECOGNIZE_DUMP=DIR draws the images with a miss or a false detection, with the detected
