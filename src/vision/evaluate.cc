@@ -350,24 +350,27 @@ Summary SummaryBuilder::Build() const {
   return s;
 }
 
+namespace {
+// One recall figure: its objects, those found and their share (null when there are none).
+json::Json RecallToJson(int objects, int found, double recall) {
+  return {{"objects", objects},
+          {"found", found},
+          {"recall", std::isfinite(recall) ? json::Json(recall) : json::Json(nullptr)}};
+}
+}  // namespace
+
 json::Json SummaryToJson(const Summary& s) {
   json::Json recall = json::Json::object();
   for (VisibilityBin bin : {VisibilityBin::kHigh, VisibilityBin::kMedium, VisibilityBin::kLow}) {
     const int i = static_cast<int>(bin);
-    const double r = s.Recall(bin);
-    recall[BinName(bin)] = {{"objects", s.objects[i]},
-                            {"found", s.found[i]},
-                            {"recall", std::isfinite(r) ? json::Json(r) : json::Json(nullptr)}};
+    recall[BinName(bin)] = RecallToJson(s.objects[i], s.found[i], s.Recall(bin));
   }
   const int found = s.found[0] + s.found[1] + s.found[2];
-  const double unoccluded = s.RecallUnoccluded();
+  json::Json unoccluded = RecallToJson(s.unoccluded_objects, s.unoccluded_found, s.RecallUnoccluded());
+  unoccluded["min_visible_fraction"] = kUnoccludedFraction;
   return {{"images", s.images},
           {"recall", recall},
-          {"recall_unoccluded",
-           {{"min_visible_fraction", kUnoccludedFraction},
-            {"objects", s.unoccluded_objects},
-            {"found", s.unoccluded_found},
-            {"recall", std::isfinite(unoccluded) ? json::Json(unoccluded) : json::Json(nullptr)}}},
+          {"recall_unoccluded", unoccluded},
           {"false_positives", s.false_positives},
           {"false_positives_per_image",
            s.images > 0 ? json::Json(s.FalsePositivesPerImage()) : json::Json(nullptr)},

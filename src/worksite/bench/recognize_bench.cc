@@ -942,7 +942,9 @@ int Run(const BenchArgs& args) {
       for (const char* m : kMethods) std::printf("%20s", get(set["methods"][m]).c_str());
       std::printf("\n");
     };
-    row("recall, unoccluded (>=0.99)",
+    const std::string unoccluded_label =
+        "recall, unoccluded (>=" + json::FormatNumber(vision::kUnoccludedFraction) + ")";
+    row(unoccluded_label.c_str(),
         [&](const json::Json& j) { return number(j["recall_unoccluded"]["recall"], "%.3f"); });
     for (const char* bin : {">=0.7", "0.4-0.7", "<0.4"}) {
       const std::string label = std::string("recall, visible ") + bin;
