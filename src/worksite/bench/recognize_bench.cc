@@ -1,12 +1,14 @@
-// teachsim bench recognize [--json] [--quick]: recognition of blocks (issue 7) on the dev set
-// (../shared/data/vision-dev: POV-Ray images with exact truth) and on our own renders with
-// controlled occlusion (a dark cylinder between the camera and a block), per method on the same
-// images: teachsim's recognizer (after the model editor's rules, and its raw fitted pose), and the
-// peer, OpenCV's LINE-MOD (raw template poses, and refined by the recognizer's own least-squares
-// fit of model edges to image lines). Figures per data set: recall per visible-fraction bin and of
-// the unoccluded blocks (vision::kUnoccludedFraction), false positives per image, position error
-// across / along the line of sight, symmetry-aware rotation error, reprojection RMS and time per
-// image (thread CPU time, one OpenCV thread).
+// teachsim bench recognize [--json] [--quick] [--render-seeds N|A-B] [--no-peer]: recognition of
+// blocks (issue 7) on the dev set (../shared/data/vision-dev: POV-Ray images with exact truth) and on
+// our own renders with controlled occlusion (a dark cylinder between the camera and a block), per
+// method on the same images: teachsim's recognizer (after the model editor's rules, and its raw
+// fitted pose), and the peer, OpenCV's LINE-MOD (raw template poses, and refined by the recognizer's
+// own least-squares fit of model edges to image lines). Figures per data set: recall per
+// visible-fraction bin and of the unoccluded blocks (vision::kUnoccludedFraction), false positives
+// per image, position error across / along the line of sight, symmetry-aware rotation error,
+// reprojection RMS and time per image (thread CPU time, one OpenCV thread). --render-seeds: the
+// renders of each seed (60 scenes; default 7), several pooled into one data set; --no-peer: teachsim
+// alone (LINE-MOD's templates not even made).
 // Environment: TEACHSIM_HOME (repository), TEACHSIM_SHARED (../shared), TEACHSIM_CACHE_DIR
 // (templates and index; default: bench-cache beside the executable, in the build folder);
 // TEACHSIM_RECOGNIZE_DUMP=DIR draws the images with a miss or a false detection, with the detected
@@ -14,10 +16,10 @@
 // TEACHSIM_RECOGNIZE_DEBUG=1 prints every LINE-MOD match beside the truth (and, for the recognizer,
 // each image's stage counts and times, each object it missed with the stage that lost it and the
 // evidence at the true pose, and each false detection); TEACHSIM_RECOGNIZE_NO_PEER=1 leaves LINE-MOD
-// out (for quick runs while working on the recognizer); TEACHSIM_RECOGNIZE_RENDER_SEED=N another set
-// of random scenes; TEACHSIM_RECOGNIZE_FEATURES=FILE appends the evidence of every fitted hypothesis
-// with its truth label (see AppendFeatures; tools/fit_evidence_weights.py fits the evidence score to
-// it); TEACHSIM_RECOGNIZE_ABLATION runs the recognizer with options changed, several separated by
+// out (as --no-peer); TEACHSIM_RECOGNIZE_RENDER_SEED=N or A-B is the default of --render-seeds;
+// TEACHSIM_RECOGNIZE_FEATURES=FILE appends the evidence of every fitted hypothesis with its truth
+// label (see AppendFeatures; tools/fit_evidence_weights.py fits the evidence score to it);
+// TEACHSIM_RECOGNIZE_ABLATION runs the recognizer with options changed, several separated by
 // commas (see ApplyAblation: no-support, plane-only, no-polish, no-refit, rules-only, index-N, support-N,
 // contrast-X, score-X, evidence-X, accept-X, below-MM, canny-X (both thresholds times X), cannylow-X,
 // cannyhigh-X, eps-X, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX,
@@ -560,6 +562,63 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   return std::nullopt;
 }
 
+// --- Arguments ---------------------------------------------------------------------------------------
+
+// `bench recognize`'s own arguments (after the common --json and --quick).
+struct RecognizeArgs {
+  std::uint64_t first_seed = 7, last_seed = 7;  // the render seeds, inclusive
+  bool no_peer = false;
+};
+
+// A render seed: decimal digits only, at most kMaxRenderSeed.
+constexpr std::uint64_t kMaxRenderSeed = 1000000000;
+std::optional<std::uint64_t> ParseSeed(const std::string& text) {
+  if (text.empty() || text.size() > 10 || text.find_first_not_of("0123456789") != std::string::npos) {
+    return std::nullopt;
+  }
+  const std::uint64_t v = std::stoull(text);
+  return v <= kMaxRenderSeed ? std::optional<std::uint64_t>(v) : std::nullopt;
+}
+
+// --render-seeds N or A-B (default TEACHSIM_RECOGNIZE_RENDER_SEED, else 7) and --no-peer (or
+// TEACHSIM_RECOGNIZE_NO_PEER); anything else is an error that names it.
+Result<RecognizeArgs> ParseRecognizeArgs(const std::vector<std::string>& extra) {
+  RecognizeArgs out;
+  std::string seeds = EnvOr("TEACHSIM_RECOGNIZE_RENDER_SEED", "7");
+  std::string seeds_from = "TEACHSIM_RECOGNIZE_RENDER_SEED";
+  out.no_peer = std::getenv("TEACHSIM_RECOGNIZE_NO_PEER") != nullptr;
+  for (std::size_t i = 0; i < extra.size(); ++i) {
+    if (extra[i] == "--no-peer") {
+      out.no_peer = true;
+    } else if (extra[i] == "--render-seeds" || extra[i].rfind("--render-seeds=", 0) == 0) {
+      if (extra[i] == "--render-seeds") {
+        if (i + 1 == extra.size()) return Status::InvalidInput("--render-seeds: needs N or A-B");
+        seeds = extra[++i];
+      } else {
+        seeds = extra[i].substr(std::string("--render-seeds=").size());
+      }
+      seeds_from = "--render-seeds";
+    } else {
+      return Status::InvalidInput("bench recognize: unknown argument '" + extra[i] +
+                                  "' (it takes --json, --quick, --render-seeds N or A-B, --no-peer)");
+    }
+  }
+  const std::size_t dash = seeds.find('-');
+  const std::optional<std::uint64_t> first = ParseSeed(seeds.substr(0, dash));
+  const std::optional<std::uint64_t> last =
+      dash == std::string::npos ? first : ParseSeed(seeds.substr(dash + 1));
+  if (!first || !last) {
+    return Status::InvalidInput(seeds_from + ": '" + seeds + "' is not a seed N or a range A-B (0 to " +
+                                std::to_string(kMaxRenderSeed) + ")");
+  }
+  if (*last < *first) {
+    return Status::InvalidInput(seeds_from + ": '" + seeds + "' ends before it starts");
+  }
+  out.first_seed = *first;
+  out.last_seed = *last;
+  return out;
+}
+
 // --- Methods and the run -----------------------------------------------------------------------------
 
 const char* const kMethods[] = {"teachsim", "teachsim_raw_pose", "linemod", "linemod_fit"};
@@ -579,6 +638,13 @@ vision::Detection FromRecognition(const vision::Recognition& r, bool raw) {
 
 int Run(const BenchArgs& args) {
   cv::setNumThreads(1);  // one core for both methods
+  const Result<RecognizeArgs> parsed = ParseRecognizeArgs(args.extra);
+  if (!parsed.ok()) {
+    std::fprintf(stderr, "teachsim: error: %s\n", parsed.status().message().c_str());
+    return 2;
+  }
+  const RecognizeArgs& options = *parsed;
+  const int render_sets = static_cast<int>(options.last_seed - options.first_seed + 1);
   const std::string shared = EnvOr("TEACHSIM_SHARED", EnvOr("TEACHSIM_HOME", TEACHSIM_BENCH_SOURCE_DIR) + "/../shared");
   const std::string truth_path = shared + "/data/vision-dev/truth.json";
   auto truth = vision::LoadTruthSet(truth_path);
@@ -620,42 +686,45 @@ int Run(const BenchArgs& args) {
     linemod_options.in_plane_step_deg = 30;
     linemod_options.distances_m = {0.42, 0.55, 0.72, 0.91};
   }
-  auto peer = LinemodPeer::Create(truth->model_sizes_m, linemod_options, cache_dir);
-  if (!peer.ok()) {
-    std::fprintf(stderr, "teachsim: error: LINE-MOD: %s\n", peer.status().message().c_str());
-    return 1;
+  // Without the peer (--no-peer), its templates are not even made.
+  std::optional<LinemodPeer> peer;
+  if (!options.no_peer) {
+    auto created = LinemodPeer::Create(truth->model_sizes_m, linemod_options, cache_dir);
+    if (!created.ok()) {
+      std::fprintf(stderr, "teachsim: error: LINE-MOD: %s\n", created.status().message().c_str());
+      return 1;
+    }
+    peer.emplace(std::move(*created));
   }
+  const int method_count = options.no_peer ? 2 : kMethodCount;  // teachsim's two first
 
-  std::vector<DataSet> sets;
-  auto dev = LoadDevSet(*truth, args.quick ? 3 : truth->cases.size());
-  if (!dev.ok()) {
-    std::fprintf(stderr, "teachsim: error: %s\n", dev.status().message().c_str());
-    return 2;
-  }
-  sets.push_back(std::move(*dev));
-  t0 = std::chrono::steady_clock::now();
-  // TEACHSIM_RECOGNIZE_RENDER_SEED: another set of random scenes (default 7, the set the
-  // recognizer's thresholds were chosen on; 8 and up are held out to check that they generalise).
-  const std::uint64_t render_seed = static_cast<std::uint64_t>(std::atoll(EnvOr("TEACHSIM_RECOGNIZE_RENDER_SEED", "7").c_str()));
   const double render_gamma = std::atof(EnvOr("TEACHSIM_RECOGNIZE_RENDER_GAMMA", "1").c_str());
   if (!(render_gamma >= vision::Camera::kMinGamma && render_gamma <= vision::Camera::kMaxGamma)) {
     std::fprintf(stderr, "teachsim: error: TEACHSIM_RECOGNIZE_RENDER_GAMMA must be in [%g, %g]\n",
                  vision::Camera::kMinGamma, vision::Camera::kMaxGamma);
     return 2;
   }
-  auto rendered = MakeRenderedSet(*truth, args.quick ? 3 : 60, render_seed, render_gamma);
-  const double render_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  if (!rendered.ok()) {
-    std::fprintf(stderr, "teachsim: error: %s\n", rendered.status().message().c_str());
-    return 1;
+  auto dev = LoadDevSet(*truth, args.quick ? 3 : truth->cases.size());
+  if (!dev.ok()) {
+    std::fprintf(stderr, "teachsim: error: %s\n", dev.status().message().c_str());
+    return 2;
   }
-  sets.push_back(std::move(*rendered));
 
+  // Two data sets: the dev set, and the renders of every seed pooled (made and measured one seed's
+  // set at a time, so that many seeds need no more memory than one).
+  struct SetInfo {
+    std::string name, description;
+    int images = 0;
+  };
+  std::vector<SetInfo> sets = {{dev->name, dev->description, 0}, {"rendered", "", 0}};
   const vision::MatchOptions match;
   std::vector<DataSetResult> results(sets.size());
-  for (std::size_t s = 0; s < sets.size(); ++s) {
+  double render_s = 0;
+  // Measures every method on `cases` into results[s]; 0, or the exit status of an error.
+  auto measure = [&](std::size_t s, const std::vector<Case>& cases) -> int {
     DataSetResult& result = results[s];
-    for (const Case& c : sets[s].cases) {
+    sets[s].images += static_cast<int>(cases.size());
+    for (const Case& c : cases) {
       for (const vision::TruthObject& t : c.truth) {
         if (t.visible_fraction >= match.min_visible_fraction && t.visible_pixels > 0) {
           ++result.bins[static_cast<int>(vision::BinOf(t.visible_fraction))];
@@ -685,7 +754,8 @@ int Run(const BenchArgs& args) {
       if (recognized.ok() && std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr) {
         std::fprintf(stderr, "%s: %d lines, %d groups, %d corners, %d support hypotheses, %zu fitted; ms:", c.name.c_str(),
                      trace.lines, trace.groups, trace.corners, trace.support_hypotheses, trace.fitted.size());
-        for (const auto& [stage, ms] : recognized->timing_ms) std::fprintf(stderr, " %s %.1f", stage.c_str(), ms);
+        for (const auto& [stage, ms] : recognized->timing_ms)
+          std::fprintf(stderr, " %s %.1f", stage.c_str(), ms);
         std::fprintf(stderr, "\n");
       }
       if (recognized.ok()) {  // which stage lost each object (not timed)
@@ -755,9 +825,8 @@ int Run(const BenchArgs& args) {
           }
         }
         if (const char* features = std::getenv("TEACHSIM_RECOGNIZE_FEATURES"); features != nullptr) {
-          AppendFeatures(features, sets[s].description.find("seed") != std::string::npos ? "render" : "dev",
-                         c, *camera, library, detection, vision::ProjectFixedEdges(&fixed_world, *camera),
-                         recognizer->options(), trace);
+          AppendFeatures(features, s == 1 ? "render" : "dev", c, *camera, library, detection,
+                         vision::ProjectFixedEdges(&fixed_world, *camera), recognizer->options(), trace);
         }
         if (const char* dump_dir = std::getenv("TEACHSIM_RECOGNIZE_DUMP");
             evaluation.ok() && dump_dir != nullptr) {
@@ -800,9 +869,10 @@ int Run(const BenchArgs& args) {
         }
       }
 
-      const bool no_peer = std::getenv("TEACHSIM_RECOGNIZE_NO_PEER") != nullptr;
+      // The peer (none with --no-peer).
+      std::vector<LinemodDetection> matches;
       cpu = ThreadCpuMs();
-      const std::vector<LinemodDetection> matches = no_peer ? std::vector<LinemodDetection>{} : peer->Detect(c.image, *camera);
+      if (peer) matches = peer->Detect(c.image, *camera);
       time_ms[2] = ThreadCpuMs() - cpu;
       for (const LinemodDetection& m : matches) found[2].push_back(m.detection);
       if (std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr) {
@@ -841,7 +911,9 @@ int Run(const BenchArgs& args) {
       // The same matches refined by the recognizer's fit: line detection and fitting are added to
       // LINE-MOD's time.
       cpu = ThreadCpuMs();
-      const std::vector<vision::ImageLine> lines = vision::DetectLines(c.image, *camera, vision::RecognizerOptions{});
+      const std::vector<vision::ImageLine> lines =
+          peer ? vision::DetectLines(c.image, *camera, vision::RecognizerOptions{})
+               : std::vector<vision::ImageLine>{};
       for (const LinemodDetection& m : matches) {
         const Eigen::Vector3d size = truth->model_sizes_m.at(m.detection.model);
         auto fit = RefineWithFit(size, camera->K(), m.camera_T_object, lines);
@@ -854,7 +926,7 @@ int Run(const BenchArgs& args) {
       }
       time_ms[3] = time_ms[2] + ThreadCpuMs() - cpu;
 
-      for (int m = 0; m < kMethodCount; ++m) {
+      for (int m = 0; m < method_count; ++m) {
         if (failed[m]) {
           ++result.errors[m];
           continue;
@@ -867,13 +939,43 @@ int Run(const BenchArgs& args) {
         result.builders[m].Add(*evaluation, time_ms[m]);
       }
     }
+    return 0;
+  };
+
+  if (const int status = measure(0, dev->cases); status != 0) return status;
+  for (std::uint64_t seed = options.first_seed; seed <= options.last_seed; ++seed) {
+    t0 = std::chrono::steady_clock::now();
+    auto rendered = MakeRenderedSet(*truth, args.quick ? 3 : 60, seed, render_gamma);
+    render_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (!rendered.ok()) {
+      std::fprintf(stderr, "teachsim: error: render seed %llu: %s\n", static_cast<unsigned long long>(seed),
+                   rendered.status().message().c_str());
+      return 1;
+    }
+    if (render_sets > 1) {
+      // Several seeds are case names' namespace: each image named by its seed too.
+      for (Case& c : rendered->cases) c.name = "seed" + std::to_string(seed) + "/" + c.name;
+    }
+    sets[1].description = rendered->description;
+    if (const int status = measure(1, rendered->cases); status != 0) return status;
+    if (render_sets > 1) {
+      std::fprintf(stderr, "bench recognize: render seed %llu measured (%d of %d)\n",
+                   static_cast<unsigned long long>(seed), static_cast<int>(seed - options.first_seed + 1),
+                   render_sets);
+    }
+  }
+  if (render_sets > 1) {
+    sets[1].description = "teachsim renderer, 640x480, random scenes (seeds " +
+                          std::to_string(options.first_seed) + "-" + std::to_string(options.last_seed) +
+                          ", " + std::to_string(args.quick ? 3 : 60) +
+                          " each), distortion, dark cylinder occluder";
   }
 
   // --- Report.
   json::Json data_sets = json::Json::array();
   for (std::size_t s = 0; s < sets.size(); ++s) {
     json::Json methods = json::Json::object();
-    for (int m = 0; m < kMethodCount; ++m) {
+    for (int m = 0; m < method_count; ++m) {
       json::Json summary = vision::SummaryToJson(results[s].builders[m].Build());
       summary["failed_images"] = results[s].errors[m];
       methods[kMethods[m]] = summary;
@@ -887,17 +989,20 @@ int Run(const BenchArgs& args) {
       }
       losses[vision::BinName(static_cast<vision::VisibilityBin>(b))] = per_stage;
     }
-    data_sets.push_back({{"name", sets[s].name},
-                         {"teachsim_losses", losses},
-                         {"description", sets[s].description},
-                         {"images", sets[s].cases.size()},
-                         {"scored_objects_per_bin",
-                          {{">=0.7", results[s].bins[0]}, {"0.4-0.7", results[s].bins[1]}, {"<0.4", results[s].bins[2]}}},
-                         {"methods", methods}});
+    data_sets.push_back(
+        {{"name", sets[s].name},
+         {"teachsim_losses", losses},
+         {"description", sets[s].description},
+         {"images", sets[s].images},
+         {"scored_objects_per_bin",
+          {{">=0.7", results[s].bins[0]}, {"0.4-0.7", results[s].bins[1]}, {"<0.4", results[s].bins[2]}}},
+         {"methods", methods}});
   }
   const json::Json document{
       {"benchmark", "recognize"},
       {"quick", args.quick},
+      {"render_seeds", {options.first_seed, options.last_seed}},
+      {"peer", !options.no_peer},
       {"match_criteria",
        {{"same_model", true},
         {"max_across_mm", match.max_across_m * 1e3},
@@ -909,9 +1014,9 @@ int Run(const BenchArgs& args) {
        {{"teachsim_index_size", recognizer->index_size()},
         {"teachsim_index_from_cache", recognizer->loaded_from_cache()},
         {"teachsim_setup_s", recognizer_setup_s},
-        {"linemod_templates", peer->num_templates()},
-        {"linemod_templates_from_cache", peer->loaded_from_cache()},
-        {"linemod_setup_s", peer->build_s()},
+        {"linemod_templates", peer ? json::Json(peer->num_templates()) : json::Json()},
+        {"linemod_templates_from_cache", peer ? json::Json(peer->loaded_from_cache()) : json::Json()},
+        {"linemod_setup_s", peer ? json::Json(peer->build_s()) : json::Json()},
         {"render_s", render_s},
         {"cache_dir", cache_dir}}},
       {"data_sets", data_sets}};
@@ -925,8 +1030,13 @@ int Run(const BenchArgs& args) {
     std::snprintf(buffer, sizeof(buffer), format, v.get<double>());
     return std::string(buffer);
   };
-  std::printf("recognition: teachsim vs OpenCV LINE-MOD (%d templates%s), same images; one core (CPU time)\n",
-              peer->num_templates(), peer->loaded_from_cache() ? ", from cache" : "");
+  if (peer) {
+    std::printf(
+        "recognition: teachsim vs OpenCV LINE-MOD (%d templates%s), same images; one core (CPU time)\n",
+        peer->num_templates(), peer->loaded_from_cache() ? ", from cache" : "");
+  } else {
+    std::printf("recognition: teachsim (the peer left out: --no-peer); one core (CPU time)\n");
+  }
   std::printf("found = same model, <= %.0f mm across, <= %.0f mm along the line of sight, <= %.0f deg (symmetry-aware)\n",
               match.max_across_m * 1e3, match.max_along_m * 1e3, match.max_rotation_rad * 180 / kPi);
   for (const json::Json& set : data_sets) {
@@ -935,11 +1045,11 @@ int Run(const BenchArgs& args) {
                 set["scored_objects_per_bin"][">=0.7"].get<int>(), set["scored_objects_per_bin"]["0.4-0.7"].get<int>(),
                 set["scored_objects_per_bin"]["<0.4"].get<int>());
     std::printf("  %-30s", "");
-    for (const char* m : kMethods) std::printf("%20s", m);
+    for (int m = 0; m < method_count; ++m) std::printf("%20s", kMethods[m]);
     std::printf("\n");
     auto row = [&](const char* label, auto get) {
       std::printf("  %-30s", label);
-      for (const char* m : kMethods) std::printf("%20s", get(set["methods"][m]).c_str());
+      for (int m = 0; m < method_count; ++m) std::printf("%20s", get(set["methods"][kMethods[m]]).c_str());
       std::printf("\n");
     };
     const std::string unoccluded_label =

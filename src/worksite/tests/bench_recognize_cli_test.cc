@@ -1,0 +1,113 @@
+// `teachsim bench recognize` from the command line: several render seeds pooled into one data set
+// (the figures are the sums of the seeds' own), teachsim alone without the peer, and bad arguments
+// answered with exit status 2 and a message naming them. Skipped where the benchmarks are not built
+// (the sanitizer build) or the dev set is missing.
+#include <gtest/gtest.h>
+#include <stdlib.h>
+
+#include <filesystem>
+#include <string>
+
+#include "teachsim/base/json.h"
+#include "tests/command_run.h"
+
+namespace teachsim::worksite {
+namespace {
+
+using testing::CommandRun;
+using testing::Teachsim;
+
+class BenchRecognizeCliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (Teachsim("bench --list").out.find("recognize") == std::string::npos) {
+      GTEST_SKIP() << "the benchmarks are not built here";
+    }
+    const std::string shared = TEACHSIM_SHARED_DIR;
+    if (!std::filesystem::exists(shared + "/data/vision-dev/truth.json"))
+      GTEST_SKIP() << shared << " has no dev set";
+    cache_ = ::testing::TempDir() + "/bench_recognize_cache";
+    ::setenv("TEACHSIM_SHARED", shared.c_str(), 1);
+    ::setenv("TEACHSIM_CACHE_DIR", cache_.c_str(), 1);
+    ::unsetenv("TEACHSIM_RECOGNIZE_RENDER_SEED");
+    ::unsetenv("TEACHSIM_RECOGNIZE_NO_PEER");
+  }
+
+  // The JSON document of `bench recognize --quick --json --no-peer ARGS`.
+  static json::Json Run(const std::string& args) {
+    const CommandRun run = Teachsim("bench recognize --quick --json --no-peer " + args);
+    EXPECT_EQ(run.status, 0) << run.err;
+    auto document = json::ParseText(run.out, "bench output");
+    EXPECT_TRUE(document.ok()) << document.status().message();
+    return document.ok() ? *document : json::Json::object();
+  }
+
+  std::string cache_;
+};
+
+TEST_F(BenchRecognizeCliTest, SeveralRenderSeedsArePooledIntoOneDataSet) {
+  const json::Json pooled = Run("--render-seeds 3-4");
+  const json::Json three = Run("--render-seeds 3");
+  const json::Json four = Run("--render-seeds=4");
+  ASSERT_EQ(pooled["data_sets"].size(), 2u);
+  EXPECT_EQ(pooled["render_seeds"], json::Json::array({3, 4}));
+  EXPECT_EQ(four["render_seeds"], json::Json::array({4, 4}));
+  EXPECT_EQ(pooled["peer"], false);
+  const json::Json& set = pooled["data_sets"][1];
+  const json::Json& a = three["data_sets"][1];
+  const json::Json& b = four["data_sets"][1];
+  EXPECT_EQ(set["name"], "rendered");
+  EXPECT_NE(set["description"].get<std::string>().find("seeds 3-4"), std::string::npos) << set["description"];
+  EXPECT_EQ(set["images"].get<int>(), 6);  // 3 per seed with --quick
+  EXPECT_EQ(set["images"].get<int>(), a["images"].get<int>() + b["images"].get<int>());
+  // Teachsim alone: the peer's methods are not reported (rather than reported as finding nothing).
+  EXPECT_TRUE(set["methods"].contains("teachsim"));
+  EXPECT_FALSE(set["methods"].contains("linemod"));
+  EXPECT_FALSE(set["methods"].contains("linemod_fit"));
+  // Every count of the pooled set is the sum of the two seeds' own.
+  const json::Json& m = set["methods"]["teachsim"];
+  const json::Json& ma = a["methods"]["teachsim"];
+  const json::Json& mb = b["methods"]["teachsim"];
+  for (const char* bin : {">=0.7", "0.4-0.7", "<0.4"}) {
+    for (const char* key : {"objects", "found"}) {
+      EXPECT_EQ(m["recall"][bin][key].get<int>(),
+                ma["recall"][bin][key].get<int>() + mb["recall"][bin][key].get<int>())
+          << bin << " " << key;
+    }
+  }
+  for (const char* key : {"objects", "found"}) {
+    EXPECT_EQ(m["recall_unoccluded"][key].get<int>(),
+              ma["recall_unoccluded"][key].get<int>() + mb["recall_unoccluded"][key].get<int>())
+        << key;
+  }
+  EXPECT_GT(m["recall"][">=0.7"]["objects"].get<int>(), 0);
+  EXPECT_EQ(m["false_positives"].get<int>(),
+            ma["false_positives"].get<int>() + mb["false_positives"].get<int>());
+  // The dev set is measured once, whatever the seeds.
+  EXPECT_EQ(pooled["data_sets"][0]["methods"]["teachsim"]["recall"],
+            three["data_sets"][0]["methods"]["teachsim"]["recall"]);
+}
+
+TEST_F(BenchRecognizeCliTest, BadArgumentsAreNamed) {
+  struct Bad {
+    std::string args, message;
+  };
+  for (const Bad& bad :
+       {Bad{"--render-seeds 5-3", "'5-3' ends before it starts"},
+        Bad{"--render-seeds x", "'x' is not a seed"}, Bad{"--render-seeds 3-", "'3-' is not a seed"},
+        Bad{"--render-seeds 99999999999", "is not a seed"}, Bad{"--render-seeds", "needs N or A-B"},
+        Bad{"--frobnicate", "unknown argument '--frobnicate'"}}) {
+    const CommandRun run = Teachsim("bench recognize --quick --no-peer " + bad.args);
+    EXPECT_EQ(run.status, 2) << bad.args;
+    EXPECT_NE(run.err.find(bad.message), std::string::npos) << bad.args << ": " << run.err;
+    EXPECT_TRUE(run.out.empty()) << bad.args << ": " << run.out;
+  }
+  ::setenv("TEACHSIM_RECOGNIZE_RENDER_SEED", "seven", 1);
+  const CommandRun run = Teachsim("bench recognize --quick --no-peer");
+  EXPECT_EQ(run.status, 2);
+  EXPECT_NE(run.err.find("TEACHSIM_RECOGNIZE_RENDER_SEED: 'seven'"), std::string::npos) << run.err;
+  ::unsetenv("TEACHSIM_RECOGNIZE_RENDER_SEED");
+}
+
+}  // namespace
+}  // namespace teachsim::worksite
