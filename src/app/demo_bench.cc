@@ -29,13 +29,24 @@ struct SeedRow {
 };
 
 int RunDemoBench(const BenchArgs& args) {
-  int seeds = args.quick ? 2 : 10;
-  std::string out = "demo-sweep", which = "all";
-  for (std::size_t i = 0; i + 1 < args.extra.size(); ++i) {
-    if (args.extra[i] == "--seeds") seeds = std::max(1, std::atoi(args.extra[i + 1].c_str()));
-    if (args.extra[i] == "--out") out = args.extra[i + 1];
-    if (args.extra[i] == "--which") which = args.extra[i + 1];
+  // Bad arguments stop the sweep before its first seed, named (exit status 2).
+  const Result<BenchOptions> given =
+      ParseBenchOptions("demo", args.extra, {"--seeds", "--out", "--which"}, {});
+  if (!given.ok()) return ReportError(given.status());
+  auto value = [&](const char* name, const std::string& fallback) {
+    const auto it = given->values.find(name);
+    return it != given->values.end() ? it->second : fallback;
+  };
+  const Result<long long> seeds_given =
+      ParseBenchCount("--seeds", value("--seeds", args.quick ? "2" : "10"), 1, 1000);
+  if (!seeds_given.ok()) return ReportError(seeds_given.status());
+  const int seeds = static_cast<int>(*seeds_given);
+  const std::string out = value("--out", "demo-sweep"), which = value("--which", "all");
+  if (which != "all" && which != "cornering" && which != "around-corner") {
+    return ReportError(
+        Status::InvalidInput("--which: '" + which + "' is not all, cornering or around-corner"));
   }
+  if (out.empty()) return ReportError(Status::InvalidInput("--out: needs a folder"));
   std::vector<SeedRow> rows;
   std::vector<std::string> names;
   for (int s = 1; s <= seeds; ++s) {

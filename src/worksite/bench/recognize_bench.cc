@@ -570,52 +570,32 @@ struct RecognizeArgs {
   bool no_peer = false;
 };
 
-// A render seed: decimal digits only, at most kMaxRenderSeed.
-constexpr std::uint64_t kMaxRenderSeed = 1000000000;
-std::optional<std::uint64_t> ParseSeed(const std::string& text) {
-  if (text.empty() || text.size() > 10 || text.find_first_not_of("0123456789") != std::string::npos) {
-    return std::nullopt;
-  }
-  const std::uint64_t v = std::stoull(text);
-  return v <= kMaxRenderSeed ? std::optional<std::uint64_t>(v) : std::nullopt;
-}
-
 // --render-seeds N or A-B (default TEACHSIM_RECOGNIZE_RENDER_SEED, else 7) and --no-peer (or
 // TEACHSIM_RECOGNIZE_NO_PEER); anything else is an error that names it.
 Result<RecognizeArgs> ParseRecognizeArgs(const std::vector<std::string>& extra) {
+  TEACHSIM_ASSIGN_OR_RETURN(const BenchOptions given,
+                            ParseBenchOptions("recognize", extra, {"--render-seeds"}, {"--no-peer"}));
   RecognizeArgs out;
-  std::string seeds = EnvOr("TEACHSIM_RECOGNIZE_RENDER_SEED", "7");
-  std::string seeds_from = "TEACHSIM_RECOGNIZE_RENDER_SEED";
-  out.no_peer = std::getenv("TEACHSIM_RECOGNIZE_NO_PEER") != nullptr;
-  for (std::size_t i = 0; i < extra.size(); ++i) {
-    if (extra[i] == "--no-peer") {
-      out.no_peer = true;
-    } else if (extra[i] == "--render-seeds" || extra[i].rfind("--render-seeds=", 0) == 0) {
-      if (extra[i] == "--render-seeds") {
-        if (i + 1 == extra.size()) return Status::InvalidInput("--render-seeds: needs N or A-B");
-        seeds = extra[++i];
-      } else {
-        seeds = extra[i].substr(std::string("--render-seeds=").size());
-      }
-      seeds_from = "--render-seeds";
-    } else {
-      return Status::InvalidInput("bench recognize: unknown argument '" + extra[i] +
-                                  "' (it takes --json, --quick, --render-seeds N or A-B, --no-peer)");
-    }
-  }
+  out.no_peer = given.flags.count("--no-peer") > 0 || std::getenv("TEACHSIM_RECOGNIZE_NO_PEER") != nullptr;
+  const auto flag = given.values.find("--render-seeds");
+  const std::string what = flag != given.values.end() ? "--render-seeds" : "TEACHSIM_RECOGNIZE_RENDER_SEED";
+  const std::string seeds =
+      flag != given.values.end() ? flag->second : EnvOr("TEACHSIM_RECOGNIZE_RENDER_SEED", "7");
+  constexpr long long kMaxSeed = 1000000000;
+  auto seed = [&](const std::string& text) -> Result<long long> {
+    Result<long long> value = ParseBenchCount(what, text, 0, kMaxSeed);
+    if (value.ok()) return value;
+    return Status::InvalidInput(what + ": '" + seeds +
+                                "' is not a seed N or a range A-B (whole numbers from 0 to " +
+                                std::to_string(kMaxSeed) + ")");
+  };
   const std::size_t dash = seeds.find('-');
-  const std::optional<std::uint64_t> first = ParseSeed(seeds.substr(0, dash));
-  const std::optional<std::uint64_t> last =
-      dash == std::string::npos ? first : ParseSeed(seeds.substr(dash + 1));
-  if (!first || !last) {
-    return Status::InvalidInput(seeds_from + ": '" + seeds + "' is not a seed N or a range A-B (0 to " +
-                                std::to_string(kMaxRenderSeed) + ")");
-  }
-  if (*last < *first) {
-    return Status::InvalidInput(seeds_from + ": '" + seeds + "' ends before it starts");
-  }
-  out.first_seed = *first;
-  out.last_seed = *last;
+  TEACHSIM_ASSIGN_OR_RETURN(const long long first, seed(seeds.substr(0, dash)));
+  TEACHSIM_ASSIGN_OR_RETURN(const long long last,
+                            seed(dash == std::string::npos ? seeds : seeds.substr(dash + 1)));
+  if (last < first) return Status::InvalidInput(what + ": '" + seeds + "' ends before it starts");
+  out.first_seed = static_cast<std::uint64_t>(first);
+  out.last_seed = static_cast<std::uint64_t>(last);
   return out;
 }
 

@@ -72,24 +72,25 @@ json::Json SweepJson(const SweepResult& r) {
 }
 
 int Run(const BenchArgs& args) {
-  std::string program_file;
-  int seeds = args.quick ? 3 : 200;
-  bool ablation = false;
-  for (std::size_t i = 0; i < args.extra.size(); ++i) {
-    if (args.extra[i] == "--program" && i + 1 < args.extra.size())
-      program_file = args.extra[++i];
-    else if (args.extra[i] == "--seeds" && i + 1 < args.extra.size())
-      seeds = std::atoi(args.extra[++i].c_str());
-    else if (args.extra[i] == "--ablation")
-      ablation = true;
-    else {
-      std::fprintf(
-          stderr,
-          "teachsim: error: bench worksite: unknown argument '%s' (--program FILE, --seeds N, --ablation)\n",
-          args.extra[i].c_str());
-      return 2;
-    }
+  // Bad arguments stop it before the first seed, named (exit status 2).
+  const Result<BenchOptions> given =
+      ParseBenchOptions("worksite", args.extra, {"--program", "--seeds"}, {"--ablation"});
+  if (!given.ok()) {
+    std::fprintf(stderr, "teachsim: error: %s\n", given.status().message().c_str());
+    return 2;
   }
+  const auto seeds_text = given->values.find("--seeds");
+  const Result<long long> seeds_given = seeds_text == given->values.end()
+                                            ? Result<long long>(args.quick ? 3 : 200)
+                                            : ParseBenchCount("--seeds", seeds_text->second, 1, 100000);
+  if (!seeds_given.ok()) {
+    std::fprintf(stderr, "teachsim: error: %s\n", seeds_given.status().message().c_str());
+    return 2;
+  }
+  std::string program_file =
+      given->values.count("--program") > 0 ? given->values.at("--program") : "";  // or made below
+  const int seeds = static_cast<int>(*seeds_given);
+  const bool ablation = given->flags.count("--ablation") > 0;
   const std::string source = TEACHSIM_BENCH_SOURCE_DIR;
   const std::string scene_file = source + "/scenes/puzzle.json";
   std::string generated_dir;

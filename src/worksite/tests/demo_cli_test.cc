@@ -11,6 +11,9 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
 
 #include "teachsim/base/json.h"
 #include "tests/command_run.h"
@@ -145,6 +148,16 @@ TEST(DemoCliTest, BadInputExitsWithStatus2AndSaysWhy) {
   run = Teachsim("demo cornering --scene " + dir + "/no-such-scene.json --out " + dir);
   EXPECT_EQ(run.status, 2);
   EXPECT_NE(run.err.find("no-such-scene.json"), std::string::npos) << run.err;
+  // The sweep (`bench demo`) stops before its first seed: nothing is written.
+  for (const auto& [args, message] : std::vector<std::pair<std::string, std::string>>{
+           {"--which sideways", "--which: 'sideways' is not all, cornering or around-corner"},
+           {"--seeds ten", "--seeds: 'ten' is not a whole number from 1 to 1000"},
+           {"--seed 3", "bench demo: unknown argument '--seed'"}}) {
+    run = Teachsim("bench demo " + args + " --out " + dir + "/sweep");
+    EXPECT_EQ(run.status, 2) << args;
+    EXPECT_NE(run.err.find(message), std::string::npos) << args << ": " << run.err;
+    EXPECT_FALSE(std::filesystem::exists(dir + "/sweep")) << args;
+  }
 }
 
 }  // namespace
