@@ -95,7 +95,8 @@ TEST_F(BenchRecognizeCliTest, BadArgumentsAreNamed) {
   for (const Bad& bad :
        {Bad{"--render-seeds 5-3", "'5-3' ends before it starts"},
         Bad{"--render-seeds x", "'x' is not a seed"}, Bad{"--render-seeds 3-", "'3-' is not a seed"},
-        Bad{"--render-seeds 99999999999", "is not a seed"}, Bad{"--render-seeds", "--render-seeds needs a value"},
+        Bad{"--render-seeds 99999999999", "is not a seed"},
+        Bad{"--render-seeds", "--render-seeds needs a value"},
         Bad{"--frobnicate", "unknown argument '--frobnicate'"}}) {
     const CommandRun run = Teachsim("bench recognize --quick --no-peer " + bad.args);
     EXPECT_EQ(run.status, 2) << bad.args;
