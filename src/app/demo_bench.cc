@@ -189,7 +189,9 @@ int RunDemoBench(const BenchArgs& args) {
   return successes == seeds ? 0 : 1;
 }
 
-TEACHSIM_BENCH("demo", "teachsim demo over seeds: verdicts, recognition errors, time per stage ([--seeds N] [--out DIR])",
+TEACHSIM_BENCH("demo",
+               "teachsim demo over seeds: verdicts, recognition errors, time per stage ([--seeds N] [--out "
+               "DIR] [--which W])",
                RunDemoBench);
 
 }  // namespace

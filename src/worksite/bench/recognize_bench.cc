@@ -1071,6 +1071,8 @@ int Run(const BenchArgs& args) {
 }  // namespace
 }  // namespace teachsim::worksite
 
-TEACHSIM_BENCH("recognize",
-               "recognition of blocks on the dev set and on renders with occlusion: teachsim vs OpenCV LINE-MOD",
-               teachsim::worksite::Run);
+TEACHSIM_BENCH(
+    "recognize",
+    "recognition of blocks on the dev set and on renders with occlusion: teachsim vs OpenCV LINE-MOD "
+    "([--render-seeds N|A-B] [--no-peer])",
+    teachsim::worksite::Run);

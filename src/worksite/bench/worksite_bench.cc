@@ -198,5 +198,6 @@ int Run(const BenchArgs& args) {
 }  // namespace teachsim::worksite
 
 TEACHSIM_BENCH("worksite",
-               "MuJoCo work site: real-time factor, controller cycle, success over seeds with model error",
+               "MuJoCo work site: real-time factor, controller cycle, success over seeds with model error "
+               "([--seeds N] [--program FILE] [--ablation])",
                teachsim::worksite::Run);
