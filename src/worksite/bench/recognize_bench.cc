@@ -925,6 +925,7 @@ int Run(const BenchArgs& args) {
   };
 
   if (const int status = measure(0, dev->cases); status != 0) return status;
+  const auto started = std::chrono::steady_clock::now();  // of the renders
   for (std::uint64_t seed = options.first_seed; seed <= options.last_seed; ++seed) {
     t0 = std::chrono::steady_clock::now();
     auto rendered = MakeRenderedSet(*truth, args.quick ? 3 : 60, seed, render_gamma);
@@ -941,9 +942,13 @@ int Run(const BenchArgs& args) {
     sets[1].description = rendered->description;
     if (const int status = measure(1, rendered->cases); status != 0) return status;
     if (render_sets > 1) {
-      std::fprintf(stderr, "bench recognize: render seed %llu measured (%d of %d)\n",
-                   static_cast<unsigned long long>(seed), static_cast<int>(seed - options.first_seed + 1),
-                   render_sets);
+      const int done = static_cast<int>(seed - options.first_seed + 1);
+      const double elapsed_s =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+      std::fprintf(stderr,
+                   "bench recognize: render seed %llu measured (%d of %d, %.0f s, about %.0f s to go)\n",
+                   static_cast<unsigned long long>(seed), done, render_sets, elapsed_s,
+                   elapsed_s / done * (render_sets - done));
     }
   }
   if (render_sets > 1) {
