@@ -89,6 +89,10 @@ int Run(const BenchArgs& args) {
   }
   std::string program_file =
       given->values.count("--program") > 0 ? given->values.at("--program") : "";  // or made below
+  if (given->values.count("--program") > 0 && program_file.empty()) {
+    std::fprintf(stderr, "teachsim: error: --program: needs a file\n");
+    return 2;
+  }
   const int seeds = static_cast<int>(*seeds_given);
   const bool ablation = given->flags.count("--ablation") > 0;
   const std::string source = TEACHSIM_BENCH_SOURCE_DIR;
