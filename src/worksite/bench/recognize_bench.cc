@@ -160,13 +160,17 @@ double DistanceToRect(const Eigen::Vector2d& p, const Eigen::Vector2d& centre, c
 // Random scenes in the work area: table, the dev set's frame at a random pose near the origin, one
 // to six blocks of the library resting on a random face with a random yaw, not touching each other
 // or the frame; in three images of four a dark cylinder (120-250 mm tall) stands close in front of
-// one block, at a random sideways offset, so the visible fractions spread over all three bins. Cameras look at
-// the work area from 0.45-0.75 m, 35-70 deg above the table, with varying focal length and
-// radial distortion. Seeded: the same count gives the same images.
+// one block, at a random sideways offset, so the visible fractions spread over all three bins. Cameras look
+// at the work area from 0.45-0.75 m, 35-70 deg above the table, with varying focal length and radial
+// distortion. Seeded: the same count gives the same images. The rendered set's description; `seeds` says
+// which scenes ("seed 7", "seeds 7-31, 60 each").
+std::string RenderedDescription(const std::string& seeds) {
+  return "teachsim renderer, 640x480, random scenes (" + seeds + "), distortion, dark cylinder occluder";
+}
+
 Result<DataSet> MakeRenderedSet(const vision::TruthSet& library, int count, std::uint64_t seed,
                                 double gamma) {
-  DataSet set{"rendered", "teachsim renderer, 640x480, random scenes (seed " + std::to_string(seed) +
-                              "), distortion, dark cylinder occluder", {}};
+  DataSet set{"rendered", RenderedDescription("seed " + std::to_string(seed)), {}};
   std::vector<std::string> models;
   for (const auto& [name, size] : library.model_sizes_m) models.push_back(name);
   vision::FrameTruth frame_shape = library.cases.empty() ? vision::FrameTruth{} : *library.cases.front().frame;
@@ -926,9 +930,10 @@ int Run(const BenchArgs& args) {
 
   if (const int status = measure(0, dev->cases); status != 0) return status;
   const auto started = std::chrono::steady_clock::now();  // of the renders
+  const int per_seed = args.quick ? 3 : 60;               // images per render seed
   for (std::uint64_t seed = options.first_seed; seed <= options.last_seed; ++seed) {
     t0 = std::chrono::steady_clock::now();
-    auto rendered = MakeRenderedSet(*truth, args.quick ? 3 : 60, seed, render_gamma);
+    auto rendered = MakeRenderedSet(*truth, per_seed, seed, render_gamma);
     render_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (!rendered.ok()) {
       std::fprintf(stderr, "teachsim: error: render seed %llu: %s\n", static_cast<unsigned long long>(seed),
@@ -952,10 +957,9 @@ int Run(const BenchArgs& args) {
     }
   }
   if (render_sets > 1) {
-    sets[1].description = "teachsim renderer, 640x480, random scenes (seeds " +
-                          std::to_string(options.first_seed) + "-" + std::to_string(options.last_seed) +
-                          ", " + std::to_string(args.quick ? 3 : 60) +
-                          " each), distortion, dark cylinder occluder";
+    sets[1].description =
+        RenderedDescription("seeds " + std::to_string(options.first_seed) + "-" +
+                            std::to_string(options.last_seed) + ", " + std::to_string(per_seed) + " each");
   }
 
   // --- Report.

@@ -73,25 +73,23 @@ json::Json SweepJson(const SweepResult& r) {
 
 int Run(const BenchArgs& args) {
   // Bad arguments stop it before the first seed, named (exit status 2).
+  auto refuse = [](const Status& status) {
+    std::fprintf(stderr, "teachsim: error: %s\n", status.message().c_str());
+    return 2;
+  };
   const Result<BenchOptions> given =
       ParseBenchOptions("worksite", args.extra, {"--program", "--seeds"}, {"--ablation"});
-  if (!given.ok()) {
-    std::fprintf(stderr, "teachsim: error: %s\n", given.status().message().c_str());
-    return 2;
-  }
+  if (!given.ok()) return refuse(given.status());
   const auto seeds_text = given->values.find("--seeds");
   const Result<long long> seeds_given = seeds_text == given->values.end()
                                             ? Result<long long>(args.quick ? 3 : 200)
                                             : ParseBenchCount("--seeds", seeds_text->second, 1, 100000);
-  if (!seeds_given.ok()) {
-    std::fprintf(stderr, "teachsim: error: %s\n", seeds_given.status().message().c_str());
-    return 2;
-  }
+  if (!seeds_given.ok()) return refuse(seeds_given.status());
+  const auto program_given = given->values.find("--program");
   std::string program_file =
-      given->values.count("--program") > 0 ? given->values.at("--program") : "";  // or made below
-  if (given->values.count("--program") > 0 && program_file.empty()) {
-    std::fprintf(stderr, "teachsim: error: --program: needs a file\n");
-    return 2;
+      program_given != given->values.end() ? program_given->second : "";  // or made below
+  if (program_given != given->values.end() && program_file.empty()) {
+    return refuse(Status::InvalidInput("--program: needs a file"));
   }
   const int seeds = static_cast<int>(*seeds_given);
   const bool ablation = given->flags.count("--ablation") > 0;
