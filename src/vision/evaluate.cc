@@ -95,7 +95,11 @@ double Quantile(const std::vector<double>& sorted, double q) {
 
 json::Json StatsToJson(const Stats& s) {
   auto number = [](double v) { return std::isfinite(v) ? json::Json(v) : json::Json(nullptr); };
-  return {{"count", s.count}, {"median", number(s.median)}, {"p90", number(s.p90)}, {"max", number(s.max)}};
+  return {{"count", s.count},
+          {"mean", number(s.mean)},
+          {"median", number(s.median)},
+          {"p90", number(s.p90)},
+          {"max", number(s.max)}};
 }
 
 }  // namespace
@@ -279,6 +283,9 @@ Stats Summarize(std::vector<double> values) {
   s.count = static_cast<int>(values.size());
   if (values.empty()) return s;
   std::sort(values.begin(), values.end());
+  double sum = 0;
+  for (double v : values) sum += v;
+  s.mean = sum / static_cast<double>(values.size());
   s.median = values.size() % 2 == 1 ? values[values.size() / 2]
                                     : 0.5 * (values[values.size() / 2 - 1] + values[values.size() / 2]);
   s.p90 = Quantile(values, 0.9);
@@ -317,10 +324,13 @@ double Summary::FalsePositivesPerImage() const {
   return images > 0 ? static_cast<double>(false_positives) / images : kNaN;
 }
 
-void SummaryBuilder::Add(const ImageEvaluation& evaluation, double time_ms) {
+void SummaryBuilder::Add(const ImageEvaluation& evaluation, const ImageTime& time) {
   ++counts_.images;
   counts_.false_positives += evaluation.false_positives;
-  time_ms_.push_back(time_ms);
+  time_ms_.push_back(time.total_ms);
+  counts_.over_time_goal += time.total_ms > kTimeGoalMs ? 1 : 0;
+  for (const auto& [stage, ms] : time.stage_ms) stage_ms_[stage].push_back(ms);
+  if (!counts_.slowest || time.total_ms > counts_.slowest->total_ms) counts_.slowest = time;
   for (const ObjectOutcome& o : evaluation.objects) {
     const int bin = static_cast<int>(BinOf(o.visible_fraction));
     const bool unoccluded = o.visible_fraction >= kUnoccludedFraction;
@@ -347,6 +357,7 @@ Summary SummaryBuilder::Build() const {
   s.along_mm = Summarize(along_mm_);
   s.reprojection_rms_px = Summarize(rms_px_);
   s.time_ms = Summarize(time_ms_);
+  for (const auto& [stage, values] : stage_ms_) s.stage_time_ms[stage] = Summarize(values);
   return s;
 }
 
@@ -368,6 +379,16 @@ json::Json SummaryToJson(const Summary& s) {
   const int found = s.found[0] + s.found[1] + s.found[2];
   json::Json unoccluded = RecallToJson(s.unoccluded_objects, s.unoccluded_found, s.RecallUnoccluded());
   unoccluded["min_visible_fraction"] = kUnoccludedFraction;
+  json::Json stages = json::Json::object();
+  for (const auto& [stage, stats] : s.stage_time_ms) stages[stage] = StatsToJson(stats);
+  json::Json slowest = nullptr;
+  if (s.slowest) {
+    json::Json stage_ms = json::Json::object(), counts = json::Json::object();
+    for (const auto& [stage, ms] : s.slowest->stage_ms) stage_ms[stage] = ms;
+    for (const auto& [what, n] : s.slowest->counts) counts[what] = n;
+    slowest = {
+        {"image", s.slowest->image}, {"ms", s.slowest->total_ms}, {"stage_ms", stage_ms}, {"counts", counts}};
+  }
   return {{"images", s.images},
           {"recall", recall},
           {"recall_unoccluded", unoccluded},
@@ -381,7 +402,11 @@ json::Json SummaryToJson(const Summary& s) {
           {"position_error_across_mm", StatsToJson(s.across_mm)},
           {"position_error_along_mm", StatsToJson(s.along_mm)},
           {"reprojection_rms_px", StatsToJson(s.reprojection_rms_px)},
-          {"time_per_image_ms", StatsToJson(s.time_ms)}};
+          {"time_per_image_ms", StatsToJson(s.time_ms)},
+          {"time_goal_ms", kTimeGoalMs},
+          {"images_over_time_goal", s.over_time_goal},
+          {"stage_time_ms", stages},
+          {"slowest_image", slowest}};
 }
 
 }  // namespace teachsim::vision

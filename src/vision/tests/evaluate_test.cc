@@ -196,13 +196,49 @@ TEST(SummaryTest, UnoccludedObjectsAreCountedApartFromTheHighBin) {
   EXPECT_TRUE(std::isnan(SummaryBuilder().Build().RecallUnoccluded()));
 }
 
+// The time goal is per image: the summary counts the images over it (at the goal is not over), keeps
+// each stage's figures over the images that gave it, and names the slowest image with its stages and
+// counts.
+TEST(SummaryTest, TimesAreSummarizedPerStageWithTheSlowestImageNamed) {
+  const ImageEvaluation image;
+  SummaryBuilder builder;
+  builder.Add(image, ImageTime{12.0, "a", {{"lines", 2.0}, {"fit", 10.0}}, {{"lines", 100}}});
+  builder.Add(image, ImageTime{kTimeGoalMs, "b", {{"lines", 4.0}, {"fit", 46.0}}, {{"lines", 300}}});
+  builder.Add(image, ImageTime{kTimeGoalMs + 0.5, "c", {{"lines", 9.0}, {"fit", 41.5}}, {{"lines", 700}}});
+  builder.Add(image, 3.0);  // a method that tells no stages
+  const Summary s = builder.Build();
+  EXPECT_EQ(s.over_time_goal, 1);
+  ASSERT_EQ(s.stage_time_ms.size(), 2u);
+  EXPECT_EQ(s.stage_time_ms.at("lines").count, 3);
+  EXPECT_DOUBLE_EQ(s.stage_time_ms.at("lines").mean, 5.0);
+  EXPECT_DOUBLE_EQ(s.stage_time_ms.at("lines").max, 9.0);
+  EXPECT_DOUBLE_EQ(s.stage_time_ms.at("fit").median, 41.5);
+  ASSERT_TRUE(s.slowest.has_value());
+  EXPECT_EQ(s.slowest->image, "c");
+  EXPECT_DOUBLE_EQ(s.time_ms.max, s.slowest->total_ms);
+  const json::Json j = SummaryToJson(s);
+  EXPECT_EQ(j["images_over_time_goal"], 1);
+  EXPECT_DOUBLE_EQ(j["time_goal_ms"].get<double>(), kTimeGoalMs);
+  EXPECT_DOUBLE_EQ(j["stage_time_ms"]["lines"]["mean"].get<double>(), 5.0);
+  EXPECT_EQ(j["slowest_image"]["image"], "c");
+  EXPECT_DOUBLE_EQ(j["slowest_image"]["stage_ms"]["lines"].get<double>(), 9.0);
+  EXPECT_EQ(j["slowest_image"]["counts"]["lines"], 700);
+  // No image: no slowest one, and no stage.
+  const json::Json none = SummaryToJson(SummaryBuilder().Build());
+  EXPECT_TRUE(none["slowest_image"].is_null());
+  EXPECT_TRUE(none["stage_time_ms"].empty());
+  EXPECT_EQ(none["images_over_time_goal"], 0);
+}
+
 TEST(SummarizeTest, NearestRankQuantiles) {
   const Stats s = Summarize({5, 1, 4, 2, 3, 6, 7, 8, 9, 10, std::nan("")});
   EXPECT_EQ(s.count, 10);
+  EXPECT_DOUBLE_EQ(s.mean, 5.5);
   EXPECT_DOUBLE_EQ(s.median, 5.5);
   EXPECT_DOUBLE_EQ(s.p90, 9);
   EXPECT_DOUBLE_EQ(s.max, 10);
   EXPECT_EQ(Summarize({}).count, 0);
+  EXPECT_TRUE(std::isnan(Summarize({}).mean));
   EXPECT_EQ(BinOf(0.7), VisibilityBin::kHigh);
   EXPECT_EQ(BinOf(0.69), VisibilityBin::kMedium);
   EXPECT_EQ(BinOf(0.39), VisibilityBin::kLow);

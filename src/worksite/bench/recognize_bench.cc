@@ -922,7 +922,16 @@ int Run(const BenchArgs& args) {
           std::fprintf(stderr, "teachsim: error: %s: %s\n", c.name.c_str(), evaluation.status().message().c_str());
           return 1;
         }
-        result.builders[m].Add(*evaluation, time_ms[m]);
+        vision::ImageTime time{time_ms[m], c.name, {}, {}};
+        if (m <= 1 && recognized.ok()) {  // the recognizer's own clock per stage, and its counts
+          for (const auto& [stage, ms] : recognized->timing_ms) time.stage_ms[stage] = ms;
+          time.counts = {{"lines", trace.lines},
+                         {"groups", trace.groups},
+                         {"corners", trace.corners},
+                         {"support_hypotheses", trace.support_hypotheses},
+                         {"fitted", static_cast<int>(trace.fitted.size())}};
+        }
+        result.builders[m].Add(*evaluation, time);
       }
     }
     return 0;
@@ -1067,6 +1076,30 @@ int Run(const BenchArgs& args) {
       const json::Json& t = j["time_per_image_ms"];
       return number(t["median"], "%.1f") + "/" + number(t["p90"], "%.1f") + "/" + number(t["max"], "%.0f");
     });
+    const std::string over_label = "images over " + json::FormatNumber(vision::kTimeGoalMs) + " ms";
+    row(over_label.c_str(), [&](const json::Json& j) {
+      return std::to_string(j["images_over_time_goal"].get<int>()) + " / " +
+             std::to_string(j["images"].get<int>());
+    });
+    // Where the recognizer's time goes, on the mean image and on the slowest one.
+    const json::Json& ours = set["methods"]["teachsim"];
+    if (!ours["stage_time_ms"].empty()) {
+      std::printf("  teachsim: mean ms per stage (its own clock):");
+      for (const auto& [stage, stats] : ours["stage_time_ms"].items()) {
+        std::printf(" %s %s", stage.c_str(), number(stats["mean"], "%.1f").c_str());
+      }
+      std::printf("\n");
+    }
+    if (const json::Json& slowest = ours["slowest_image"]; !slowest.is_null()) {
+      std::printf("  teachsim: slowest image %s, %.1f ms;", slowest["image"].get<std::string>().c_str(),
+                  slowest["ms"].get<double>());
+      for (const auto& [what, n] : slowest["counts"].items())
+        std::printf(" %s %d", what.c_str(), n.get<int>());
+      std::printf(";");
+      for (const auto& [stage, ms] : slowest["stage_ms"].items())
+        std::printf(" %s %.1f", stage.c_str(), ms.get<double>());
+      std::printf("\n");
+    }
     std::printf("  teachsim: objects by the stage that lost them (of them found), per bin\n");
     for (const char* bin : {">=0.7", "0.4-0.7", "<0.4"}) {
       std::printf("    %-8s", bin);

@@ -83,6 +83,22 @@ TEST_F(BenchRecognizeCliTest, SeveralRenderSeedsArePooledIntoOneDataSet) {
   EXPECT_GT(m["recall"][">=0.7"]["objects"].get<int>(), 0);
   EXPECT_EQ(m["false_positives"].get<int>(),
             ma["false_positives"].get<int>() + mb["false_positives"].get<int>());
+  // Where the time went: every image's stages, and the slowest image named with its seed and its
+  // counts (which of the pooled images it was; the times themselves differ from run to run).
+  EXPECT_LE(m["images_over_time_goal"].get<int>(), 6);
+  EXPECT_EQ(m["time_goal_ms"].get<double>(), 50.0);
+  for (const char* stage : {"lines", "groups", "index", "support_hypotheses", "fit_verify", "total"}) {
+    ASSERT_TRUE(m["stage_time_ms"].contains(stage)) << stage;
+    EXPECT_EQ(m["stage_time_ms"][stage]["count"].get<int>(), 6) << stage;
+    EXPECT_LE(m["stage_time_ms"][stage]["mean"].get<double>(),
+              m["stage_time_ms"]["total"]["mean"].get<double>());
+  }
+  const json::Json& slowest = m["slowest_image"];
+  ASSERT_TRUE(slowest.is_object()) << slowest;
+  EXPECT_EQ(slowest["image"].get<std::string>().rfind("seed", 0), 0u) << slowest;
+  EXPECT_DOUBLE_EQ(slowest["ms"].get<double>(), m["time_per_image_ms"]["max"].get<double>());
+  EXPECT_GT(slowest["counts"]["lines"].get<int>(), 0) << slowest;
+  EXPECT_TRUE(slowest["stage_ms"].contains("fit_verify")) << slowest;
   // The dev set is measured once, whatever the seeds.
   EXPECT_EQ(pooled["data_sets"][0]["methods"]["teachsim"]["recall"],
             three["data_sets"][0]["methods"]["teachsim"]["recall"]);
