@@ -145,7 +145,11 @@ HypothesisFit FitSupportHypothesis(const Model& model, const Eigen::Matrix3d& K,
   };
   FitResult& fit = out.fit;
   fit.camera_T_object = initial;
+  // The rounds' fits leave out the covariance: it is made once, for the pose kept, from that
+  // round's matches and loss (PoseCovariance: the same figures as the fit would give).
   FitResult best;  // the round with the most explained length; none: the initial pose
+  std::vector<LineMatch> best_matches;
+  RobustLoss best_loss = huber;
   double best_explained = explained(initial);
   bool improved = false;
   const double loose[3] = {3.0, 1.5, 1.0};
@@ -157,29 +161,41 @@ HypothesisFit FitSupportHypothesis(const Model& model, const Eigen::Matrix3d& K,
       out.failed = true;
       return out;
     }
-    const std::vector<LineMatch> matches = OnEdgeMatches(model, K, fit.camera_T_object, set.matches, kOnEdgeSpreadPx);
+    std::vector<LineMatch> matches =
+        OnEdgeMatches(model, K, fit.camera_T_object, set.matches, kOnEdgeSpreadPx);
     if (round == 0) first_matches = matches;
-    fit = FitPoseOnPlane(model.box_size_m, K, camera_T_world, fit.camera_T_object, matches, options.max_iterations,
-                         round == 2 ? tukey : huber);
+    const RobustLoss& loss = round == 2 ? tukey : huber;
+    fit = FitPoseOnPlane(model.box_size_m, K, camera_T_world, fit.camera_T_object, matches,
+                         options.max_iterations, loss, false);
     out.rounds.push_back(fit.camera_T_object);
     const double e = explained(fit.camera_T_object);
-    if (e >= best_explained) best_explained = e, best = fit, improved = true;  // ties: the later, tighter round
+    if (e >= best_explained) {  // ties: the later, tighter round
+      best_explained = e, best = fit, improved = true;
+      best_matches = std::move(matches), best_loss = loss;
+    }
   }
   // No round explained more than the start: the start, with its covariance.
-  fit = improved ? best : FitPoseOnPlane(model.box_size_m, K, camera_T_world, initial, first_matches, 0, huber);
+  if (improved) {
+    fit = best;
+    fit.covariance_camera = PoseCovariance(model.box_size_m, K, fit.camera_T_object, best_matches, best_loss);
+  } else {
+    fit = FitPoseOnPlane(model.box_size_m, K, camera_T_world, initial, first_matches, 0, huber);
+  }
   if (options.support_refine_6dof) {
     const EdgeMatchSet on_plane = MatchEdges(model, K, fit.camera_T_object, lines, options.match_distance_px, match_angle);
-    const FitResult free =
-        FitPoseToLines(model.box_size_m, K, fit.camera_T_object,
-                       OnEdgeMatches(model, K, fit.camera_T_object, on_plane.matches, kOnEdgeSpreadPx),
-                       options.max_iterations, tukey);
+    const std::vector<LineMatch> free_matches =
+        OnEdgeMatches(model, K, fit.camera_T_object, on_plane.matches, kOnEdgeSpreadPx);
+    const FitResult free = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, free_matches,
+                                          options.max_iterations, tukey, false);
     const EdgeMatchSet refined = MatchEdges(model, K, free.camera_T_object, lines, options.match_distance_px, match_angle);
     if (refined.matches.size() >= 3 && refined.matched_fraction >= on_plane.matched_fraction &&
         explained(free.camera_T_object) >= best_explained) {
-      const double rms_free = FitPoseToLines(model.box_size_m, K, free.camera_T_object, refined.matches, 0, 0).rms_px;
-      const double rms_plane = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, on_plane.matches, 0, 0).rms_px;
+      const double rms_free = LineResidualRmsPx(model.box_size_m, K, free.camera_T_object, refined.matches);
+      const double rms_plane = LineResidualRmsPx(model.box_size_m, K, fit.camera_T_object, on_plane.matches);
       if (rms_free <= rms_plane) {
         fit = free;
+        fit.covariance_camera =
+            PoseCovariance(model.box_size_m, K, free.camera_T_object, free_matches, tukey);
         out.rounds.push_back(fit.camera_T_object);
       }
     }
@@ -197,9 +213,12 @@ HypothesisFit FitIndexHypothesis(const Model& model, const Eigen::Matrix3d& K, c
     return ExplainedLengthPx(model, K, pose, lines, kExplainedPx, match_angle);
   };
   FitResult& fit = out.fit;
-  fit = FitPoseToLines(model.box_size_m, K, initial, seed_matches, 8, huber);
+  // As for the support hypotheses: the covariance once, for the round kept.
+  fit = FitPoseToLines(model.box_size_m, K, initial, seed_matches, 8, huber, false);
   out.rounds.push_back(fit.camera_T_object);
   FitResult best = fit;
+  std::vector<LineMatch> best_matches = seed_matches;
+  RobustLoss best_loss = huber;
   double best_explained = explained(fit.camera_T_object);
   const double loose[3] = {3.0, 1.5, 1.0};
   for (int round = 0; round < 3; ++round) {
@@ -211,14 +230,20 @@ HypothesisFit FitIndexHypothesis(const Model& model, const Eigen::Matrix3d& K, c
     }
     // The first round starts from the group's own correspondences, up to 20 px off: the closest
     // line beside a predicted edge need not be its own yet, so all matches count (Huber).
-    fit = FitPoseToLines(model.box_size_m, K, fit.camera_T_object,
-                         round == 0 ? set.matches : OnEdgeMatches(model, K, fit.camera_T_object, set.matches, kOnEdgeSpreadPx),
-                         options.max_iterations, round == 2 ? tukey : huber);
+    std::vector<LineMatch> matches =
+        round == 0 ? set.matches : OnEdgeMatches(model, K, fit.camera_T_object, set.matches, kOnEdgeSpreadPx);
+    const RobustLoss& loss = round == 2 ? tukey : huber;
+    fit = FitPoseToLines(model.box_size_m, K, fit.camera_T_object, matches, options.max_iterations, loss,
+                         false);
     out.rounds.push_back(fit.camera_T_object);
     const double e = explained(fit.camera_T_object);
-    if (e >= best_explained) best_explained = e, best = fit;  // ties: the later, tighter round
+    if (e >= best_explained) {  // ties: the later, tighter round
+      best_explained = e, best = fit;
+      best_matches = std::move(matches), best_loss = loss;
+    }
   }
   fit = best;
+  fit.covariance_camera = PoseCovariance(model.box_size_m, K, fit.camera_T_object, best_matches, best_loss);
   return out;
 }
 

@@ -251,13 +251,27 @@ FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K
 }
 
 FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
-                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
-                         int max_iterations, const RobustLoss& loss) {
+                         const geometry::Pose3& camera_T_object_initial,
+                         const std::vector<LineMatch>& matches, int max_iterations, const RobustLoss& loss,
+                         bool with_covariance) {
   FitResult out = FitLm<6>(size_m, K, camera_T_object_initial, matches, max_iterations, loss,
                            Eigen::Matrix<double, 6, 6>::Identity());
-  if (matches.empty()) return out;
-  out.covariance_camera = Covariance(size_m, K, out.camera_T_object, matches, loss);
+  if (with_covariance) out.covariance_camera = PoseCovariance(size_m, K, out.camera_T_object, matches, loss);
   return out;
+}
+
+Eigen::Matrix<double, 6, 6> PoseCovariance(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
+                                           const geometry::Pose3& camera_T_object,
+                                           const std::vector<LineMatch>& matches, const RobustLoss& loss) {
+  return matches.empty() ? Matrix6d(Matrix6d::Zero()) : Covariance(size_m, K, camera_T_object, matches, loss);
+}
+
+double LineResidualRmsPx(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
+                         const geometry::Pose3& camera_T_object, const std::vector<LineMatch>& matches) {
+  if (matches.empty()) return 0;
+  Eigen::VectorXd r(static_cast<Eigen::Index>(2 * matches.size()));
+  Residuals(size_m, K.inverse().transpose(), camera_T_object, matches, &r, nullptr);
+  return std::sqrt(r.squaredNorm() / static_cast<double>(r.size()));
 }
 
 FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
@@ -267,14 +281,16 @@ FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K
                         RobustLoss{RobustLoss::Kind::kHuber, huber_px});
 }
 
-FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
-                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
-                         int max_iterations, const RobustLoss& loss) {
+FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
+                         const geometry::Pose3& camera_T_world,
+                         const geometry::Pose3& camera_T_object_initial,
+                         const std::vector<LineMatch>& matches, int max_iterations, const RobustLoss& loss,
+                         bool with_covariance) {
   // The height and the tilt stay as the support gave them.
-  FitResult out = FitLm<3>(size_m, K, camera_T_object_initial, matches, max_iterations, loss, PlaneBasis(camera_T_world));
-  if (matches.empty()) return out;
+  FitResult out =
+      FitLm<3>(size_m, K, camera_T_object_initial, matches, max_iterations, loss, PlaneBasis(camera_T_world));
   // The covariance of the full pose at the constrained optimum (what the recognition reports).
-  out.covariance_camera = Covariance(size_m, K, out.camera_T_object, matches, loss);
+  if (with_covariance) out.covariance_camera = PoseCovariance(size_m, K, out.camera_T_object, matches, loss);
   return out;
 }
 

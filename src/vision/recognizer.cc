@@ -457,10 +457,9 @@ PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geo
   out.matched_fraction = set.matched_fraction;
   out.matches = static_cast<int>(set.matches.size());
   if (!set.matches.empty()) {
-    out.rms_px = FitPoseToLines(model.box_size_m, K, camera_T_object, set.matches, 0, 0).rms_px;
-    out.rms_closest_px = FitPoseToLines(model.box_size_m, K, camera_T_object,
-                                        ClosestMatchesPerEdge(model, K, camera_T_object, set.matches), 0, 0)
-                             .rms_px;
+    out.rms_px = LineResidualRmsPx(model.box_size_m, K, camera_T_object, set.matches);
+    out.rms_closest_px = LineResidualRmsPx(model.box_size_m, K, camera_T_object,
+                                           ClosestMatchesPerEdge(model, K, camera_T_object, set.matches));
   }
   struct PerEdge {
     int samples = 0, free = 0, supported = 0, plus = 0, minus = 0;

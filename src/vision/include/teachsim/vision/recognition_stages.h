@@ -130,9 +130,20 @@ struct RobustLoss {
   Kind kind = Kind::kHuber;
   double scale_px = 0;
 };
+// with_covariance false: covariance_camera is left zero (a fit whose pose may be dropped: the
+// hypotheses' rounds; PoseCovariance gives it later for the pose kept, to the bit the same).
 FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
-                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
-                         int max_iterations, const RobustLoss& loss);
+                         const geometry::Pose3& camera_T_object_initial,
+                         const std::vector<LineMatch>& matches, int max_iterations, const RobustLoss& loss,
+                         bool with_covariance = true);
+// A fit's covariance (FitResult::covariance_camera) at a pose: the inverse of the robustly weighted
+// normal matrix there, scaled by the residual variance; zero without matches.
+Eigen::Matrix<double, 6, 6> PoseCovariance(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
+                                           const geometry::Pose3& camera_T_object,
+                                           const std::vector<LineMatch>& matches, const RobustLoss& loss);
+// The RMS of the endpoint-to-line residuals at a pose (a fit's rms_px), without fitting; 0 without matches.
+double LineResidualRmsPx(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
+                         const geometry::Pose3& camera_T_object, const std::vector<LineMatch>& matches);
 
 // The same with the object kept on its support plane: 3 parameters (world x, y and a turn about the
 // world's vertical through the object's centre); height and tilt stay as the start gave them. Fewer
@@ -140,9 +151,11 @@ FitResult FitPoseToLines(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K
 FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
                          const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
                          int max_iterations, double huber_px);
-FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
-                         const geometry::Pose3& camera_T_object_initial, const std::vector<LineMatch>& matches,
-                         int max_iterations, const RobustLoss& loss);
+FitResult FitPoseOnPlane(const Eigen::Vector3d& size_m, const Eigen::Matrix3d& K,
+                         const geometry::Pose3& camera_T_world,
+                         const geometry::Pose3& camera_T_object_initial,
+                         const std::vector<LineMatch>& matches, int max_iterations, const RobustLoss& loss,
+                         bool with_covariance = true);
 
 // Image lines matched to the predicted visible edges of a box at a pose (undistorted px): each
 // line to the nearest edge within max_distance_px and max_angle_rad, overlapping it by half its length.
