@@ -48,6 +48,45 @@ std::vector<ImageLine> EdgeLines(const Model& model, const Eigen::Matrix3d& K, c
   return lines;
 }
 
+// The hypotheses' rounds fit without the covariance and ask for it once for the pose they keep:
+// PoseCovariance there is the fit's own to the bit, and LineResidualRmsPx a zero-step fit's RMS.
+TEST(HypothesisFitTest, TheCovarianceAndTheRmsAloneAreTheFitsOwn) {
+  const Camera camera = SyntheticCamera();
+  const Eigen::Matrix3d K = camera.K();
+  const Model bar = Bar();
+  const geometry::Pose3 camera_T_truth = camera.camera_T_world() * OnTable(bar.box_size_m, 0.02, 0.01, 0.6);
+  std::vector<int> edges;
+  const std::vector<ImageLine> lines = EdgeLines(bar, K, camera_T_truth, &edges);
+  // Noisy lines (0.3-0.9 px off), so that the RMS and the residual variance are not zero.
+  std::vector<LineMatch> matches;
+  for (size_t i = 0; i < lines.size(); ++i) {
+    const Eigen::Vector2d normal =
+        Eigen::Vector2d(lines[i].a.y() - lines[i].b.y(), lines[i].b.x() - lines[i].a.x()).normalized();
+    matches.push_back({edges[i], lines[i].a + (0.3 + 0.05 * edges[i]) * normal, lines[i].b - 0.4 * normal});
+  }
+  geometry::Pose3 start = camera_T_truth;
+  start.translation += Eigen::Vector3d(0.003, -0.002, 0.001);
+  for (const RobustLoss& loss :
+       {RobustLoss{RobustLoss::Kind::kHuber, 1.5}, RobustLoss{RobustLoss::Kind::kTukey, 2.0}}) {
+    const FitResult with = FitPoseToLines(bar.box_size_m, K, start, matches, 30, loss);
+    const FitResult without = FitPoseToLines(bar.box_size_m, K, start, matches, 30, loss, false);
+    EXPECT_TRUE(without.covariance_camera.isZero(0));
+    EXPECT_EQ(with.camera_T_object.translation, without.camera_T_object.translation);
+    EXPECT_GT(with.covariance_camera(0, 0), 0);
+    EXPECT_EQ(PoseCovariance(bar.box_size_m, K, without.camera_T_object, matches, loss),
+              with.covariance_camera);
+    const FitResult on_plane =
+        FitPoseOnPlane(bar.box_size_m, K, camera.camera_T_world(), start, matches, 30, loss);
+    EXPECT_EQ(PoseCovariance(bar.box_size_m, K, on_plane.camera_T_object, matches, loss),
+              on_plane.covariance_camera);
+  }
+  EXPECT_EQ(LineResidualRmsPx(bar.box_size_m, K, start, matches),
+            FitPoseToLines(bar.box_size_m, K, start, matches, 0, 0).rms_px);
+  EXPECT_GT(LineResidualRmsPx(bar.box_size_m, K, start, matches), 1);
+  EXPECT_EQ(LineResidualRmsPx(bar.box_size_m, K, start, {}), 0);
+  EXPECT_TRUE(PoseCovariance(bar.box_size_m, K, start, {}, RobustLoss{}).isZero(0));
+}
+
 // A block standing on the table, its start moved on the table by about 15 px in the image and
 // turned by 10 deg: the support-plane fit (3 rounds on the plane, then 6 DOF) ends on the block.
 TEST(HypothesisFitTest, ARenderedBlockConvergesFromAStart15PxAnd10DegOff) {

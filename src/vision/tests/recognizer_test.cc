@@ -834,49 +834,6 @@ TEST(PoseFitTest, OnItsSupportPlaneRecoversPositionAndYawAndKeepsHeightAndTilt) 
   EXPECT_NEAR((camera.world_T_camera() * high.camera_T_object).translation.z(), truth.translation.z() + 0.002, 1e-12);
 }
 
-// The hypotheses' rounds fit without the covariance and ask for it once for the pose they keep:
-// PoseCovariance there is the fit's own to the bit, and LineResidualRmsPx a zero-step fit's RMS.
-TEST(PoseFitTest, TheCovarianceAndTheRmsAloneAreTheFitsOwn) {
-  const Camera camera = SyntheticCamera();
-  const Eigen::Matrix3d K = camera.K();
-  const Model bar = Bar();
-  const geometry::Pose3 camera_T_truth = camera.camera_T_world() * OnTable(bar.box_size_m, 0.02, 0.01, 0.6);
-  std::vector<LineMatch> matches;
-  const uint16_t visible = VisibleBoxEdges(bar.box_size_m, camera_T_truth.Inverse().translation);
-  for (int e = 0; e < 12; ++e) {
-    if (!(visible >> e & 1)) continue;
-    const Eigen::Vector2d pa =
-        (K * (camera_T_truth * BoxVertex(bar.box_size_m, kBoxEdges[e][0]))).hnormalized();
-    const Eigen::Vector2d pb =
-        (K * (camera_T_truth * BoxVertex(bar.box_size_m, kBoxEdges[e][1]))).hnormalized();
-    // Noisy lines (0.3-0.9 px off), so that the RMS and the residual variance are not zero.
-    const Eigen::Vector2d normal = Eigen::Vector2d(pa.y() - pb.y(), pb.x() - pa.x()).normalized();
-    matches.push_back(
-        {e, pa + 0.2 * (pb - pa) + (0.3 + 0.05 * e) * normal, pa + 0.8 * (pb - pa) - 0.4 * normal});
-  }
-  geometry::Pose3 start = camera_T_truth;
-  start.translation += Eigen::Vector3d(0.003, -0.002, 0.001);
-  for (const RobustLoss& loss :
-       {RobustLoss{RobustLoss::Kind::kHuber, 1.5}, RobustLoss{RobustLoss::Kind::kTukey, 2.0}}) {
-    const FitResult with = FitPoseToLines(bar.box_size_m, K, start, matches, 30, loss);
-    const FitResult without = FitPoseToLines(bar.box_size_m, K, start, matches, 30, loss, false);
-    EXPECT_TRUE(without.covariance_camera.isZero(0));
-    EXPECT_EQ(with.camera_T_object.translation, without.camera_T_object.translation);
-    EXPECT_GT(with.covariance_camera(0, 0), 0);
-    EXPECT_EQ(PoseCovariance(bar.box_size_m, K, without.camera_T_object, matches, loss),
-              with.covariance_camera);
-    const FitResult on_plane =
-        FitPoseOnPlane(bar.box_size_m, K, camera.camera_T_world(), start, matches, 30, loss);
-    EXPECT_EQ(PoseCovariance(bar.box_size_m, K, on_plane.camera_T_object, matches, loss),
-              on_plane.covariance_camera);
-  }
-  EXPECT_EQ(LineResidualRmsPx(bar.box_size_m, K, start, matches),
-            FitPoseToLines(bar.box_size_m, K, start, matches, 0, 0).rms_px);
-  EXPECT_GT(LineResidualRmsPx(bar.box_size_m, K, start, matches), 1);
-  EXPECT_EQ(LineResidualRmsPx(bar.box_size_m, K, start, {}), 0);
-  EXPECT_TRUE(PoseCovariance(bar.box_size_m, K, start, {}, RobustLoss{}).isZero(0));
-}
-
 // The ablation is one flag: without the support source the trace has no corner and no fit of
 // kind kGroupKinds; with it, the rendered block is accepted from a support hypothesis.
 TEST(RecognizerTest, TheSupportSourceCanBeSwitchedOff) {
