@@ -276,6 +276,54 @@ Result<ImageEvaluation> EvaluateImage(const std::vector<TruthObject>& truth, con
   return out;
 }
 
+Result<std::vector<int>> FalsePositiveHosts(const std::vector<TruthObject>& truth,
+                                            const std::vector<Detection>& detections,
+                                            const std::map<std::string, Eigen::Vector3d>& model_sizes_m,
+                                            const ImageEvaluation& evaluation, double margin_m) {
+  if (evaluation.detection_truth.size() != detections.size()) {
+    return Status::InvalidInput("the evaluation has " + std::to_string(evaluation.detection_truth.size()) +
+                                " detections, not " + std::to_string(detections.size()));
+  }
+  auto size_of = [&](const std::string& model) -> const Eigen::Vector3d* {
+    const auto it = model_sizes_m.find(model);
+    return it == model_sizes_m.end() ? nullptr : &it->second;
+  };
+  // Whether `point` lies in the box of `size` at `world_T_box`, grown by margin_m on every side.
+  auto inside = [&](const Eigen::Vector3d& point, const geometry::Pose3& world_T_box,
+                    const Eigen::Vector3d& size) {
+    const Eigen::Vector3d local = world_T_box.Inverse() * point;
+    return (local.cwiseAbs().array() <= 0.5 * size.array() + margin_m).all();
+  };
+  std::vector<int> hosts(detections.size(), -1);
+  for (std::size_t d = 0; d < detections.size(); ++d) {
+    if (evaluation.detection_truth[d] != -1) continue;
+    const Detection& det = detections[d];
+    const Eigen::Vector3d* det_size = size_of(det.model);
+    if (det_size == nullptr) {
+      return Status::InvalidInput("detection " + std::to_string(d) + ": model \"" + det.model +
+                                  "\" has no box size");
+    }
+    double nearest = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < truth.size(); ++i) {
+      const Eigen::Vector3d* truth_size = size_of(truth[i].model);
+      if (truth_size == nullptr) {
+        return Status::InvalidInput("truth object \"" + truth[i].name + "\": model \"" + truth[i].model +
+                                    "\" has no box size");
+      }
+      const Eigen::Vector3d& t = truth[i].world_T_object.translation;
+      const Eigen::Vector3d& c = det.world_T_object.translation;
+      if (!inside(c, truth[i].world_T_object, *truth_size) && !inside(t, det.world_T_object, *det_size))
+        continue;
+      const double distance = (t - c).norm();
+      if (distance < nearest) {
+        nearest = distance;
+        hosts[d] = static_cast<int>(i);
+      }
+    }
+  }
+  return hosts;
+}
+
 Stats Summarize(std::vector<double> values) {
   values.erase(std::remove_if(values.begin(), values.end(), [](double v) { return !std::isfinite(v); }),
                values.end());

@@ -170,6 +170,44 @@ TEST(EvaluateImageTest, HiddenObjectsAreNotScoredAndUnknownModelsFail) {
   EXPECT_FALSE(EvaluateImage(TwoCubesAndASlab(), {}, kSizes, camera, options).ok());
 }
 
+TEST(EvaluateImageTest, FalsePositivesAreTracedToTheBlockTheyStandAt) {
+  const std::map<std::string, Eigen::Vector3d> sizes = {
+      {"cube45", {0.045, 0.045, 0.045}}, {"bar90", {0.09, 0.045, 0.045}}, {"slab", {0.09, 0.06, 0.03}}};
+  // A bar along x at the origin and a cube 0.2 m away.
+  const std::vector<TruthObject> truth = {
+      {"bar", "bar90", geometry::Pose3(Eigen::Quaterniond::Identity(), {0, 0, 0.0225}), 0.6, 3000},
+      {"cube", "cube45", geometry::Pose3(AxisAngle({0, 0, 1}, 0.4), {0.2, 0, 0.0225}), 1.0, 4000}};
+  const Eigen::Vector3d camera(0.5, 0, 0.5);
+  const std::vector<Detection> detections = {
+      // The cube, found.
+      {"cube45", truth[1].world_T_object, 0.9},
+      // A cube on the bar's far end (its centre inside the bar): at the bar.
+      {"cube45", geometry::Pose3(Eigen::Quaterniond::Identity(), {0.0225, 0, 0.0225}), 0.8},
+      // A slab whose box holds the cube's centre but whose centre lies outside the cube: at the cube.
+      {"slab", geometry::Pose3(Eigen::Quaterniond::Identity(), {0.2 + 0.04, 0, 0.015}), 0.7},
+      // A cube on the table far from both: at no block.
+      {"cube45", geometry::Pose3(Eigen::Quaterniond::Identity(), {-0.2, 0.2, 0.0225}), 0.6}};
+  auto evaluation = EvaluateImage(truth, detections, sizes, camera, MatchOptions{});
+  ASSERT_TRUE(evaluation.ok()) << evaluation.status().message();
+  ASSERT_EQ(evaluation->false_positives, 3);
+  auto hosts = FalsePositiveHosts(truth, detections, sizes, *evaluation);
+  ASSERT_TRUE(hosts.ok()) << hosts.status().message();
+  EXPECT_EQ(*hosts, (std::vector<int>{-1, 0, 1, -1}));
+  // Moved along the bar until its centre is 33 mm past the bar's end, the cube stands at nothing.
+  std::vector<Detection> moved = detections;
+  moved[1].world_T_object.translation.x() = 0.045 + 0.0225 + 0.01;
+  auto moved_evaluation = EvaluateImage(truth, moved, sizes, camera, MatchOptions{});
+  ASSERT_TRUE(moved_evaluation.ok());
+  EXPECT_EQ((*FalsePositiveHosts(truth, moved, sizes, *moved_evaluation))[1], -1);
+  // A model without a size, and an evaluation of other detections, are errors that say so.
+  std::vector<Detection> unknown = detections;
+  unknown[3].model = "wedge";
+  auto bad = FalsePositiveHosts(truth, unknown, sizes, *evaluation);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("wedge"), std::string::npos);
+  EXPECT_FALSE(FalsePositiveHosts(truth, {detections[0]}, sizes, *evaluation).ok());
+}
+
 TEST(SummaryTest, UnoccludedObjectsAreCountedApartFromTheHighBin) {
   // Four objects of the >= 0.7 bin; only the two at most 1 % hidden are unoccluded.
   ImageEvaluation image;

@@ -616,6 +616,10 @@ struct DataSetResult {
   int bins[3] = {0, 0, 0};
   int losses[3][vision::kLossStages] = {};  // teachsim: per bin, objects by the stage that lost them
   int losses_found[3][vision::kLossStages] = {};  // ... of them those the evaluation counts as found
+  // teachsim's false positives by where they stand (vision::FalsePositiveHosts): at a missed block, by
+  // the stage that lost it; at a found block; at a block too little visible to be scored; at none.
+  int false_at_missed[vision::kLossStages] = {};
+  int false_at_found = 0, false_at_unscored = 0, false_elsewhere = 0;
 };
 
 vision::Detection FromRecognition(const vision::Recognition& r, bool raw) {
@@ -828,6 +832,9 @@ int Run(const BenchArgs& args) {
           DumpCase(dump_dir, c, *camera, truth->model_sizes_m, detection, recognized->objects, *evaluation,
                    vision::FindCorners(detection.lines, recognizer->options()));
         }
+        // Each truth object's outcome for its false positives: -1 unscored, -2 found, else the stage that
+        // lost it.
+        std::vector<int> outcome_of(c.truth.size(), -1);
         for (std::size_t i = 0; i < c.truth.size(); ++i) {
           const vision::TruthObject& t = c.truth[i];
           if (t.visible_fraction < match.min_visible_fraction || t.visible_pixels <= 0) continue;
@@ -845,6 +852,7 @@ int Run(const BenchArgs& args) {
             }
           }
           if (was_found) ++result.losses_found[bin][static_cast<int>(loss.stage)];
+          outcome_of[i] = was_found ? -2 : static_cast<int>(loss.stage);
           if (std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr && !was_found) {
             auto p = camera->Project(t.world_T_object.translation);
             std::fprintf(stderr,
@@ -860,6 +868,27 @@ int Run(const BenchArgs& args) {
             std::fprintf(stderr, "    at the true pose: matched %.2f, support %.2f, coverage %.2f, rms %.2f px, %d matches\n",
                          at_truth.matched_fraction, at_truth.support_fraction, at_truth.coverage, at_truth.rms_px,
                          at_truth.matches);
+          }
+        }
+        if (evaluation.ok()) {
+          auto hosts = vision::FalsePositiveHosts(c.truth, found[0], truth->model_sizes_m, *evaluation);
+          if (!hosts.ok()) {
+            std::fprintf(stderr, "teachsim: error: %s: %s\n", c.name.c_str(),
+                         hosts.status().message().c_str());
+            return 1;
+          }
+          for (std::size_t d = 0; d < hosts->size(); ++d) {
+            if (evaluation->detection_truth[d] != -1) continue;
+            const int host = (*hosts)[d];
+            const int outcome = host < 0 ? -3 : outcome_of[static_cast<std::size_t>(host)];
+            if (outcome == -3)
+              ++result.false_elsewhere;
+            else if (outcome == -1)
+              ++result.false_at_unscored;
+            else if (outcome == -2)
+              ++result.false_at_found;
+            else
+              ++result.false_at_missed[outcome];
           }
         }
       }
@@ -990,9 +1019,21 @@ int Run(const BenchArgs& args) {
       }
       losses[vision::BinName(static_cast<vision::VisibilityBin>(b))] = per_stage;
     }
+    json::Json at_missed = json::Json::object();
+    int missed_total = 0;
+    for (int k = 0; k < vision::kLossStages; ++k) {
+      at_missed[vision::LossStageName(static_cast<vision::LossStage>(k))] = results[s].false_at_missed[k];
+      missed_total += results[s].false_at_missed[k];
+    }
+    at_missed["total"] = missed_total;
     data_sets.push_back(
         {{"name", sets[s].name},
          {"teachsim_losses", losses},
+         {"teachsim_false_positives",
+          {{"at_missed_block", at_missed},
+           {"at_found_block", results[s].false_at_found},
+           {"at_unscored_block", results[s].false_at_unscored},
+           {"elsewhere", results[s].false_elsewhere}}},
          {"description", sets[s].description},
          {"images", sets[s].images},
          {"scored_objects_per_bin",
@@ -1109,6 +1150,15 @@ int Run(const BenchArgs& args) {
       }
       std::printf("\n");
     }
+    const json::Json& fp = set["teachsim_false_positives"];
+    std::printf("  teachsim: false detections at a missed block %d (lost at:",
+                fp["at_missed_block"]["total"].get<int>());
+    for (const auto& [stage, n] : fp["at_missed_block"].items()) {
+      if (stage != "total" && n.get<int>() > 0) std::printf(" %s %d", stage.c_str(), n.get<int>());
+    }
+    std::printf("), at a found block %d, at an unscored block %d, elsewhere %d\n",
+                fp["at_found_block"].get<int>(), fp["at_unscored_block"].get<int>(),
+                fp["elsewhere"].get<int>());
   }
   return 0;
 }

@@ -83,6 +83,22 @@ TEST_F(BenchRecognizeCliTest, SeveralRenderSeedsArePooledIntoOneDataSet) {
   EXPECT_GT(m["recall"][">=0.7"]["objects"].get<int>(), 0);
   EXPECT_EQ(m["false_positives"].get<int>(),
             ma["false_positives"].get<int>() + mb["false_positives"].get<int>());
+  // The false positives by where they stand account for every one of them, pooled as the rest.
+  for (const json::Json* s : {&set, &a, &b}) {
+    const json::Json& fp = (*s)["teachsim_false_positives"];
+    int stages = 0;
+    for (const auto& [stage, n] : fp["at_missed_block"].items()) {
+      if (stage != "total") stages += n.get<int>();
+    }
+    EXPECT_EQ(stages, fp["at_missed_block"]["total"].get<int>()) << fp;
+    EXPECT_EQ(fp["at_missed_block"]["total"].get<int>() + fp["at_found_block"].get<int>() +
+                  fp["at_unscored_block"].get<int>() + fp["elsewhere"].get<int>(),
+              (*s)["methods"]["teachsim"]["false_positives"].get<int>())
+        << fp;
+  }
+  EXPECT_EQ(set["teachsim_false_positives"]["elsewhere"].get<int>(),
+            a["teachsim_false_positives"]["elsewhere"].get<int>() +
+                b["teachsim_false_positives"]["elsewhere"].get<int>());
   // Where the time went: every image's stages, and the slowest image named with its seed and its
   // counts (which of the pooled images it was; the times themselves differ from run to run).
   EXPECT_LE(m["images_over_time_goal"].get<int>(), 6);

@@ -133,6 +133,17 @@ struct ImageEvaluation {
                                                     const Eigen::Vector3d& camera_centre_in_world,
                                                     const MatchOptions& options);
 
+// Where each false positive of `evaluation` stands: the truth object (scored or not) whose box
+// holds the detection's centre, or whose centre the detection's box holds, each box grown by
+// margin_m (the nearest centre first when several do); -1 for a false positive at no truth object
+// and for every detection that is not a false positive. A wrong model fitted onto a block (a cube on
+// one end of a bar, a slab over a bar) stands at it; a pose on the frame, a shadow or the occluder
+// stands at none. Fails when a model has no size in `model_sizes_m`.
+[[nodiscard]] Result<std::vector<int>> FalsePositiveHosts(
+    const std::vector<TruthObject>& truth, const std::vector<Detection>& detections,
+    const std::map<std::string, Eigen::Vector3d>& model_sizes_m, const ImageEvaluation& evaluation,
+    double margin_m = 0.005);
+
 // --- Summary ---------------------------------------------------------------------------------------
 
 struct Stats {
