@@ -880,10 +880,12 @@ int Run(const BenchArgs& args) {
           for (std::size_t d = 0; d < hosts->size(); ++d) {
             if (evaluation->detection_truth[d] != -1) continue;
             const int host = (*hosts)[d];
-            const int outcome = host < 0 ? -3 : outcome_of[static_cast<std::size_t>(host)];
-            if (outcome == -3)
+            if (host < 0) {
               ++result.false_elsewhere;
-            else if (outcome == -1)
+              continue;
+            }
+            const int outcome = outcome_of[static_cast<std::size_t>(host)];
+            if (outcome == -1)
               ++result.false_at_unscored;
             else if (outcome == -2)
               ++result.false_at_found;
