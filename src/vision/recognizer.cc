@@ -103,6 +103,11 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(fraction("occlusion_min_hidden_share", occlusion_min_hidden_share));
   TEACHSIM_RETURN_IF_ERROR(fraction("occlusion_min_shown_share", occlusion_min_shown_share));
   TEACHSIM_RETURN_IF_ERROR(fraction("occlusion_min_evidence_score", occlusion_min_evidence_score));
+  TEACHSIM_RETURN_IF_ERROR(positive("contour_min_length_px", contour_min_length_px));
+  if (!(contour_min_step_grey >= 0))
+    return Status::InvalidInput("RecognizerOptions::contour_min_step_grey must be >= 0");
+  TEACHSIM_RETURN_IF_ERROR(fraction("contour_max_hidden_coverage", contour_max_hidden_coverage));
+  TEACHSIM_RETURN_IF_ERROR(fraction("contour_min_shown_share", contour_min_shown_share));
   TEACHSIM_RETURN_IF_ERROR(fraction("matched_share_rescue_score", matched_share_rescue_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_score", min_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_coverage", min_coverage));
@@ -428,17 +433,84 @@ int HiddenSupportedSamples(const Model& behind_model, const geometry::Pose3& cam
   return hidden;
 }
 
-// The share of a pose's outline samples inside the image that the occluders hide.
-double HiddenOutlineShare(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                          const std::vector<Occluder>& occluders) {
-  int hidden = 0, total = 0;
+// What hides part of a pose's outline in the occlusion pass: accepted recognitions' boxes, or an
+// occluding contour.
+struct Hiding {
+  const std::vector<Occluder>* boxes = nullptr;
+  const ContourOccluder* contour = nullptr;
+  Eigen::Matrix3d K = Eigen::Matrix3d::Identity();  // for the contour (pin-hole, undistorted px)
+  bool operator()(const Eigen::Vector3d& point_in_camera) const {
+    if (boxes != nullptr && HiddenByAny(*boxes, point_in_camera)) return true;
+    return contour != nullptr && point_in_camera.z() > 1e-6 &&
+           contour->Hides((K * point_in_camera).hnormalized());
+  }
+};
+
+// Of a pose's outline samples inside the image: the share hidden, and the share of the hidden ones
+// with an edge across (where something in front hides the outline, the image shows little of it).
+struct HiddenOutline {
+  double share = 0, coverage = 0;
+};
+HiddenOutline HiddenOutlineShare(const Model& model, const Camera& camera,
+                                 const geometry::Pose3& camera_T_object, const Hiding& hiding,
+                                 const EdgeMap& edge_map) {
+  int hidden = 0, total = 0, supported = 0;
   ForEachOutlineSample(
       model.box_size_m, camera_T_object, camera,
-      [&](const Eigen::Vector3d& point, const Eigen::Vector2d&, const Eigen::Vector2d&, int) {
+      [&](const Eigen::Vector3d& point, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int) {
         ++total;
-        hidden += HiddenByAny(occluders, point) ? 1 : 0;
+        if (!hiding(point)) return;
+        ++hidden;
+        supported += EdgeAcross(edge_map, c, normal) ? 1 : 0;
       });
-  return total > 0 ? static_cast<double>(hidden) / total : 0;
+  HiddenOutline out;
+  if (total > 0) out.share = static_cast<double>(hidden) / total;
+  if (hidden > 0) out.coverage = static_cast<double>(supported) / hidden;
+  return out;
+}
+
+// Whether a pose hidden in part by a contour occluder goes on past it: an edge that runs from the
+// outline in view into the hidden part, continued past its hidden end over its own length, finds
+// image edges with a grey-level step across them (the step rule's) along kContinuedRunPx or more in
+// a row. A block whose middle is hidden shows its far end beyond the occluder; a smaller model fitted
+// to the near end (a cube at a bar's end) would otherwise pass as hidden there too.
+constexpr double kContinuedRunPx = 20;
+bool ContinuesPastHiddenEnd(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                            const ContourOccluder& occluder, const EdgeMap& edge_map,
+                            const RecognizerOptions& options) {
+  const Eigen::Matrix3d K = camera.K();
+  const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    const Eigen::Vector3d p = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][0]);
+    const Eigen::Vector3d q = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][1]);
+    if (!(p.z() > 1e-3) || !(q.z() > 1e-3)) continue;
+    const bool p_hidden = occluder.Hides((K * p).hnormalized()),
+               q_hidden = occluder.Hides((K * q).hnormalized());
+    if (p_hidden == q_hidden) continue;
+    const Eigen::Vector3d from = p_hidden ? p : q,
+                          step = p_hidden ? Eigen::Vector3d(p - q) : Eigen::Vector3d(q - p);
+    const auto a = camera.ProjectFromCamera(from), b = camera.ProjectFromCamera(from + step);
+    if (!a || !b) continue;
+    const int n = static_cast<int>((*b - *a).norm() / kOutlineSpacingPx);
+    int run = 0;
+    for (int i = 1; i <= n; ++i) {
+      const double t = static_cast<double>(i) / n;
+      const auto c = camera.ProjectFromCamera(from + t * step),
+                 c2 = camera.ProjectFromCamera(from + (t + 0.01) * step);
+      if (!c || !c2 || !camera.InImage(*c)) {
+        run = 0;
+        continue;
+      }
+      const Eigen::Vector2d along = (*c2 - *c).normalized(), normal(-along.y(), along.x());
+      const bool supported =
+          EdgeAcross(edge_map, *c, normal) &&
+          GreyStepAcross(edge_map, *c, normal, options.step_offset_px) >= options.min_step_grey;
+      run = supported ? run + 1 : 0;
+      if (run * kOutlineSpacingPx >= kContinuedRunPx) return true;
+    }
+  }
+  return false;
 }
 
 // The evidence for a pose (what verification decides on): matched lines and their residuals, and
@@ -451,7 +523,7 @@ double HiddenOutlineShare(const Model& model, const Camera& camera, const geomet
 PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                              const LineDetection& detection, const FixedEdgeMap* fixed,
                              const RecognizerOptions& options, const EdgeMatchSet& set,
-                             const std::vector<Occluder>* occluders = nullptr) {
+                             const Hiding* hiding = nullptr) {
   const Eigen::Matrix3d K = camera.K();
   PoseEvidence out;
   out.matched_fraction = set.matched_fraction;
@@ -471,7 +543,7 @@ PoseEvidence ComputeEvidence(const Model& model, const Camera& camera, const geo
   ForEachOutlineSample(
       model.box_size_m, camera_T_object, camera,
       [&](const Eigen::Vector3d& point, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int e) {
-        if (occluders != nullptr && HiddenByAny(*occluders, point)) return;
+        if (hiding != nullptr && (*hiding)(point)) return;
         PerEdge& pe = per_edge[static_cast<size_t>(e)];
         ++samples;
         ++pe.samples;
@@ -1066,6 +1138,7 @@ class RecognitionPass {
   std::vector<Candidate> candidates_;
   std::vector<double> rank_;  // of each candidate in the selection
   std::vector<Rejected> rejected_;
+  bool hidden_only_ = false;  // the fit being verified is of a placement behind a contour
 };
 
 bool RecognitionPass::AlreadyTried(int model_index, const geometry::Pose3& initial) {
@@ -1120,6 +1193,7 @@ void RecognitionPass::Verify(int model_index, FitResult fit, RecognitionTrace::F
           {model_index, fit, traced != nullptr ? static_cast<int>(trace_->fitted.size()) - 1 : -1});
     }
   };
+  if (hidden_only_) return reject(Outcome::kSupport);
   EdgeMatchSet set =
       MatchEdges(model, K_, fit.camera_T_object, lines_, options_.match_distance_px, match_angle_);
   // Short of the matched share, a pose is judged on its evidence only with the rescue on
@@ -1220,7 +1294,11 @@ void RecognitionPass::FitSupportHypotheses(const std::vector<ImageCorner>& corne
     }
     const geometry::Pose3 initial = camera_T_world * h.world_T_object;
     if (AlreadyTried(h.model, initial)) continue;
+    // A placement scored as hidden behind a contour is judged so only (the occlusion pass): a
+    // block in full view has its own hypotheses.
+    hidden_only_ = h.behind_contour;
     FitOnSupport(h.model, kSupportKind, initial);
+    hidden_only_ = false;
   }
 }
 
@@ -1388,7 +1466,7 @@ std::vector<size_t> RecognitionPass::Select() {
 
 void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io) {
   std::vector<size_t>& accepted = *accepted_io;
-  if (!options_.occlusion_reverify || accepted.empty() || rejected_.empty()) return;
+  if (!options_.occlusion_reverify || rejected_.empty()) return;
   // Which occluders can hide part of a pose: those whose boxes' images (pin-hole projections: a
   // ray through both boxes maps to one point in both) overlap and that come nearer the camera.
   struct ImageExtent {
@@ -1433,47 +1511,29 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io) {
     free_lines.push_back(lines_[l]);
     free_index.push_back(static_cast<int>(l));
   }
-  std::vector<Occluder> in_front;
-  std::vector<size_t> passed;
-  for (const Rejected& r : rejected_) {
+  const std::vector<ImageLine> contours = options_.occlusion_contours
+                                              ? OccludingContours(detection_, camera_, options_)
+                                              : std::vector<ImageLine>{};
+  // A pose judged again with `hiding` leaving out part of its outline (`hidden` of its samples in
+  // the image): the matched share over the outline in view, without the lines accepted recognitions
+  // claim; the rules, and the occlusion pass's evidence score.
+  auto judge_hidden = [&](const Rejected& r, const Hiding& hiding,
+                          double hidden) -> std::optional<Candidate> {
     const Model& model = models_.models[static_cast<size_t>(r.model)];
     const geometry::Pose3& pose = r.fit.camera_T_object;
-    const ImageExtent extent = image_extent(model, pose);
-    in_front.clear();
-    for (size_t k = 0; k < occluders.size(); ++k) {
-      const ImageExtent& o = occluder_extents[k];
-      if (!extent.valid || !o.valid ||
-          (o.near_z < extent.far_z && (o.lo.array() <= extent.hi.array()).all() &&
-           (extent.lo.array() <= o.hi.array()).all())) {
-        in_front.push_back(occluders[k]);
-      }
-    }
-    if (in_front.empty()) continue;
-    // One that interpenetrates an accepted recognition cannot join them (most turned-down poses
-    // are other fits of an accepted block): not judged again.
-    bool deep = false;
-    for (size_t k = 0; k < accepted.size() && !deep; ++k) {
-      deep = Interpenetrate(r.model, pose, candidates_[accepted[k]]);
-    }
-    if (deep) continue;
-    const double hidden = HiddenOutlineShare(model, camera_, pose, in_front);
-    if (hidden < options_.occlusion_min_hidden_share || 1 - hidden < options_.occlusion_min_shown_share) {
-      continue;
-    }
-    if (Implausible(model, pose)) continue;
     EdgeMatchSet set = MatchEdges(model, K_, pose, free_lines, options_.match_distance_px, match_angle_);
     for (int& seg : set.segments) seg = free_index[static_cast<size_t>(seg)];
     // The matched share of the outline in view (the hidden share as the samples inside the image give it).
     const double covered = set.matched_fraction * set.visible_length_px;
     set.visible_length_px *= 1 - hidden;
     set.matched_fraction = set.visible_length_px > 0 ? std::min(1.0, covered / set.visible_length_px) : 0;
-    if (!EnoughMatched(model, set, pose)) continue;
+    if (!EnoughMatched(model, set, pose)) return std::nullopt;
     const PoseEvidence evidence =
-        ComputeEvidence(model, camera_, pose, detection_, &fixed_edges_, options_, set, &in_front);
+        ComputeEvidence(model, camera_, pose, detection_, &fixed_edges_, options_, set, &hiding);
     double rms_px = 0;
     const Outcome verdict = Judge(evidence, options_, &rms_px);
     const double score = EvidenceScore(evidence);
-    if (verdict != Outcome::kCandidate || score < options_.occlusion_min_evidence_score) continue;
+    if (verdict != Outcome::kCandidate || score < options_.occlusion_min_evidence_score) return std::nullopt;
     Candidate c;
     c.trace_index = r.trace_index;
     c.model = r.model;
@@ -1484,9 +1544,68 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io) {
     c.evidence = evidence;
     c.rms_px = rms_px;
     c.rank_score = score;
+    return c;
+  };
+  std::vector<Occluder> in_front;
+  std::vector<size_t> passed;
+  for (const Rejected& r : rejected_) {
+    const Model& model = models_.models[static_cast<size_t>(r.model)];
+    const geometry::Pose3& pose = r.fit.camera_T_object;
+    // One that interpenetrates an accepted recognition cannot join them (most turned-down poses
+    // are other fits of an accepted block): not judged again.
+    bool deep = false;
+    for (size_t k = 0; k < accepted.size() && !deep; ++k) {
+      deep = Interpenetrate(r.model, pose, candidates_[accepted[k]]);
+    }
+    if (deep || Implausible(model, pose)) continue;
+    const ImageExtent extent = image_extent(model, pose);
+    in_front.clear();
+    for (size_t k = 0; k < occluders.size(); ++k) {
+      const ImageExtent& o = occluder_extents[k];
+      if (!extent.valid || !o.valid ||
+          (o.near_z < extent.far_z && (o.lo.array() <= extent.hi.array()).all() &&
+           (extent.lo.array() <= o.hi.array()).all())) {
+        in_front.push_back(occluders[k]);
+      }
+    }
+    std::optional<Candidate> best;
+    if (!in_front.empty()) {
+      Hiding hiding;
+      hiding.boxes = &in_front;
+      const double hidden = HiddenOutlineShare(model, camera_, pose, hiding, detection_.edge_map).share;
+      if (hidden >= options_.occlusion_min_hidden_share && 1 - hidden >= options_.occlusion_min_shown_share) {
+        best = judge_hidden(r, hiding, hidden);
+      }
+    }
+    if (!best && !contours.empty() && extent.valid) {
+      std::array<Eigen::Vector2d, 8> px;  // the pose's image (pin-hole)
+      for (int v = 0; v < 8; ++v)
+        px[static_cast<size_t>(v)] = (K_ * (pose * BoxVertex(model.box_size_m, v))).hnormalized();
+      const uint16_t visible = VisibleBoxEdges(model.box_size_m, pose.Inverse().translation);
+      std::vector<ContourOccluder> occlusions;
+      ContourOcclusions(contours, BoxImage(px, visible), &occlusions);
+      for (const ContourOccluder& contour : occlusions) {
+        Hiding hiding;
+        hiding.contour = &contour;
+        hiding.K = K_;
+        const HiddenOutline hidden = HiddenOutlineShare(model, camera_, pose, hiding, detection_.edge_map);
+        if (hidden.share < options_.occlusion_min_hidden_share ||
+            1 - hidden.share < options_.contour_min_shown_share ||
+            hidden.coverage > options_.contour_max_hidden_coverage) {
+          continue;
+        }
+        std::optional<Candidate> c = judge_hidden(r, hiding, hidden.share);
+        if (c && (!best || c->rank_score > best->rank_score) &&
+            !ContinuesPastHiddenEnd(model, camera_, pose, contour, detection_.edge_map, options_) &&
+            !AmbiguousExtent(models_, r.model, pose, contour, K_)) {
+          best = std::move(c);
+        }
+      }
+    }
+    if (!best) continue;
     passed.push_back(candidates_.size());
-    rank_.push_back(NetSupportPx(evidence) * c.rank_score);
-    candidates_.push_back(std::move(c));
+    rank_.push_back(NetSupportPx(best->evidence) * best->rank_score);
+    candidates_.push_back(std::move(*best));
   }
   std::stable_sort(passed.begin(), passed.end(), [&](size_t a, size_t b) { return rank_[a] > rank_[b]; });
   for (size_t i : passed) {
@@ -1548,8 +1667,11 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     const std::vector<SupportPlane> planes = SupportPlanes(fixed, options_);
     const auto ts = Clock::now();
     const std::vector<ImageCorner> corners = FindCorners(lines, options_);
+    const std::vector<ImageLine> contours = options_.occlusion_reverify && options_.occlusion_contours
+                                                ? OccludingContours(detection, camera, options_)
+                                                : std::vector<ImageLine>{};
     const std::vector<SupportHypothesis> support_hypotheses =
-        SupportHypotheses(models_, camera, detection, corners, planes, options_);
+        SupportHypotheses(models_, camera, detection, corners, planes, options_, contours);
     support_ms = Ms(ts, Clock::now());
     if (trace != nullptr) {
       trace->corners = static_cast<int>(corners.size());

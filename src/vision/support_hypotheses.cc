@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <vector>
 
@@ -23,38 +24,40 @@ double Cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x()
 
 Eigen::Vector2d End(const ImageLine& l, int end) { return end == 0 ? l.a : l.b; }
 
-// Edge support before any fit: sample points along the visible predicted edges (projected with the
-// lens, straight between the projected vertices, or the ends of an edge's part in view) with a
-// Canny edge pixel within 2 px across whose gradient is across the edge, over all sample points
-// inside the image. 0 as soon as `min_score` cannot be reached any more (most poses are wrong; the
-// exact score of those is never used).
-double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const geometry::Pose3& camera_T_object,
-                    const EdgeMap& edge_map, double spacing_px, double min_score) {
+// Sample points along the visible predicted edges of a box (projected with the lens, straight
+// between the projected vertices, or the ends of an edge's part in view), every spacing_px, the
+// edges' ends left out, those inside the image. With K, each sample's pin-hole (undistorted) pixel
+// too, at the same share along the edge. False when a vertex is behind or next to the camera.
+struct OutlineSample {
+  Eigen::Vector2d at, normal, pinhole;
+};
+bool SampleOutline(const Eigen::Vector3d& size_m, const Camera& camera,
+                   const geometry::Pose3& camera_T_object, double spacing_px, const Eigen::Matrix3d* K,
+                   std::vector<OutlineSample>* samples) {
+  samples->clear();
   const uint16_t visible = VisibleBoxEdges(size_m, camera_T_object.Inverse().translation);
   Eigen::Vector3d vertex[8];
   Eigen::Vector2d px[8];
   for (int i = 0; i < 8; ++i) {
     vertex[i] = camera_T_object * BoxVertex(size_m, i);
     const auto p = camera.ProjectFromCamera(vertex[i], 0.05);
-    if (!p) return 0;
+    if (!p) return false;
     px[i] = *p;
   }
-  struct Sample {
-    Eigen::Vector2d at, normal;
-  };
-  thread_local std::vector<Sample> samples;
-  samples.clear();
   for (int e = 0; e < 12; ++e) {
     if (!(visible >> e & 1)) continue;
     const int i0 = kBoxEdges[static_cast<size_t>(e)][0], i1 = kBoxEdges[static_cast<size_t>(e)][1];
     Eigen::Vector2d a = px[i0], b = px[i1];
+    Eigen::Vector3d a3 = vertex[i0], b3 = vertex[i1];
     // An edge leaving the camera's view is sampled between its ends in view (Camera::SegmentInView:
     // beyond, the lens model folds far-off points into the picture).
     const auto in_view = camera.SegmentInView(vertex[i0], vertex[i1]);
     if (!in_view) continue;
     if (in_view->first != 0 || in_view->second != 1) {
-      const auto pa = camera.ProjectFromCamera(vertex[i0] + in_view->first * (vertex[i1] - vertex[i0]));
-      const auto pb = camera.ProjectFromCamera(vertex[i0] + in_view->second * (vertex[i1] - vertex[i0]));
+      a3 = vertex[i0] + in_view->first * (vertex[i1] - vertex[i0]);
+      b3 = vertex[i0] + in_view->second * (vertex[i1] - vertex[i0]);
+      const auto pa = camera.ProjectFromCamera(a3);
+      const auto pb = camera.ProjectFromCamera(b3);
       if (!pa || !pb) continue;
       a = *pa;
       b = *pb;
@@ -62,12 +65,26 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
     const double length = (b - a).norm();
     if (length < 3) continue;
     const Eigen::Vector2d along = (b - a) / length, normal(-along.y(), along.x());
+    Eigen::Vector2d pa = Eigen::Vector2d::Zero(), pb = Eigen::Vector2d::Zero();
+    if (K != nullptr) pa = (*K * a3).hnormalized(), pb = (*K * b3).hnormalized();
     const int n = std::max(2, static_cast<int>(length / spacing_px));
     for (int i = 0; i < n; ++i) {
-      const Eigen::Vector2d c = a + (0.08 + 0.84 * (i + 0.5) / n) * (b - a);
-      if (camera.InImage(c)) samples.push_back({c, normal});
+      const double u = 0.08 + 0.84 * (i + 0.5) / n;
+      const Eigen::Vector2d c = a + u * (b - a);
+      if (camera.InImage(c)) samples->push_back({c, normal, pa + u * (pb - pa)});
     }
   }
+  return true;
+}
+
+// Edge support before any fit: of the sample points (SampleOutline), those with a Canny edge pixel
+// within 2 px across whose gradient is across the edge. 0 as soon as `min_score` cannot be reached
+// any more (most poses are wrong; the exact score of those is never used).
+double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera,
+                    const geometry::Pose3& camera_T_object, const EdgeMap& edge_map, double spacing_px,
+                    double min_score) {
+  thread_local std::vector<OutlineSample> samples;
+  if (!SampleOutline(size_m, camera, camera_T_object, spacing_px, nullptr, &samples)) return 0;
   const int count = static_cast<int>(samples.size());
   if (count < 8) return 0;
   const int needed = static_cast<int>(std::ceil(min_score * count - 1e-9));
@@ -77,6 +94,68 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera, const g
     if (EdgeAcross(edge_map, samples[static_cast<size_t>(i)].at, samples[static_cast<size_t>(i)].normal)) ++supported;
   }
   return static_cast<double>(supported) / count;
+}
+
+// A placement short of the support threshold, scored again with the outline on one side of an
+// occluding contour across its image left out (RecognizerOptions::occlusion_contours): the support
+// of the samples in view (every 3 px), over the contours and sides where at least
+// contour_min_shown_share of the samples are in view, at least occlusion_min_hidden_share hidden
+// and at most contour_max_hidden_coverage of the hidden ones supported. -1 when none reaches
+// support_min_score; else the best side's support times its share in view.
+double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& camera, const Eigen::Matrix3d& K,
+                                const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
+                                const std::vector<ImageLine>& contours, const RecognizerOptions& options) {
+  std::array<Eigen::Vector2d, 8> px;
+  for (int v = 0; v < 8; ++v) {
+    const Eigen::Vector3d p = camera_T_object * BoxVertex(size_m, v);
+    if (!(p.z() > 0.05)) return -1;
+    px[static_cast<size_t>(v)] = (K * p).hnormalized();
+  }
+  const uint16_t visible = VisibleBoxEdges(size_m, camera_T_object.Inverse().translation);
+  thread_local std::vector<ContourOccluder> occlusions;
+  ContourOcclusions(contours, BoxImage(px, visible), &occlusions);
+  if (occlusions.empty()) return -1;
+  thread_local std::vector<OutlineSample> samples;
+  thread_local std::vector<uint8_t> supported;
+  // The best side's support in view (and its share in view) at a sample spacing; -1: none passes.
+  auto best_side = [&](double spacing_px, double min_score, double* shown_share) {
+    if (!SampleOutline(size_m, camera, camera_T_object, spacing_px, &K, &samples) || samples.size() < 8)
+      return -1.0;
+    supported.resize(samples.size());
+    for (size_t i = 0; i < samples.size(); ++i)
+      supported[i] = EdgeAcross(edge_map, samples[i].at, samples[i].normal);
+    double best = -1;
+    for (const ContourOccluder& occluder : occlusions) {
+      int hidden = 0, hidden_supported = 0, shown_supported = 0;
+      for (size_t i = 0; i < samples.size(); ++i) {
+        if (occluder.Hides(samples[i].pinhole)) {
+          ++hidden;
+          hidden_supported += supported[i];
+        } else {
+          shown_supported += supported[i];
+        }
+      }
+      const int count = static_cast<int>(samples.size()), shown = count - hidden;
+      if (hidden < options.occlusion_min_hidden_share * count ||
+          shown < options.contour_min_shown_share * count ||
+          hidden_supported > options.contour_max_hidden_coverage * hidden) {
+        continue;
+      }
+      const double score = static_cast<double>(shown_supported) / shown;
+      if (score >= min_score && score * shown / count > best * *shown_share) {
+        best = score;
+        *shown_share = static_cast<double>(shown) / count;
+      }
+    }
+    return best;
+  };
+  // Coarse samples first (as PlacementSupport), then every 3 px. Ranked as the whole outline would
+  // be were the hidden part unsupported: after every placement that reached the threshold unaided.
+  double shown_share = 0;
+  if (best_side(12, options.support_min_score - 0.1, &shown_share) < 0) return -1;
+  shown_share = 0;
+  const double best = best_side(3, options.support_min_score, &shown_share);
+  return best < 0 ? -1 : best * shown_share;
 }
 
 // A placement's edge support as the support hypotheses score it: coarse samples first (most poses
@@ -243,7 +322,8 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
                                                  const LineDetection& detection,
                                                  const std::vector<ImageCorner>& corners,
                                                  const std::vector<SupportPlane>& planes,
-                                                 const RecognizerOptions& options) {
+                                                 const RecognizerOptions& options,
+                                                 const std::vector<ImageLine>& contours) {
   const Eigen::Matrix3d K = camera.K();
   const Eigen::Matrix3d K_inv = K.inverse();
   const geometry::Pose3& camera_T_world = camera.camera_T_world();
@@ -289,6 +369,13 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     }
   }
 
+  // The occluding contours near a corner: within the image of the largest box that can have its
+  // vertex there (its diagonal at the depth of the highest plane a vertex can lie on, pin-hole).
+  double largest_diagonal_m = 0, highest_m = -std::numeric_limits<double>::infinity();
+  for (const Model& m : models.models) largest_diagonal_m = std::max(largest_diagonal_m, m.box_size_m.norm());
+  for (const SupportPlane& plane : planes) highest_m = std::max(highest_m, plane.z_m + largest_diagonal_m);
+  std::vector<ImageLine> near_contours;
+
   std::vector<SupportHypothesis> all;
   PlaceSet scored(models);  // a placement tried before is not scored again (PlaceSet)
   // The box with its corner at `corner`, its axis i along u_i (unit, horizontal), j along u_j and
@@ -312,6 +399,13 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     const geometry::Pose3 camera_T_object = camera_T_world * h.world_T_object;
     if (!(camera_T_object.translation.z() > 0.05) || !scored.Insert(r.model, h.world_T_object)) return;
     h.score = PlacementSupport(s, camera, camera_T_object, detection.edge_map, options);
+    if (h.score < 0 && !near_contours.empty()) {
+      h.score =
+          OccludedPlacementSupport(s, camera, K, camera_T_object, detection.edge_map, near_contours, options);
+      h.behind_contour = true;
+    } else {
+      h.behind_contour = false;
+    }
     if (h.score < 0) return;
     h.corner = corner_index;
     h.plane = plane_index;
@@ -322,6 +416,17 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     const ImageCorner& corner = corners[c];
     int vertical[2];
     for (int k = 0; k < 2; ++k) vertical[k] = VerticalArm(K, camera_T_world, corner.point, corner.arm_end[static_cast<size_t>(k)], vertical_tol);
+    near_contours.clear();
+    if (!contours.empty()) {
+      const std::optional<Eigen::Vector3d> nearest = on_plane(corner.point, highest_m);
+      const double reach_px = nearest ? K(0, 0) * largest_diagonal_m / (camera_T_world * *nearest).z()
+                                      : std::numeric_limits<double>::infinity();
+      for (const ImageLine& line : contours) {
+        const Eigen::Vector2d d = line.b - line.a;
+        const double t = std::clamp(d.dot(corner.point - line.a) / d.squaredNorm(), 0.0, 1.0);
+        if ((line.a + t * d - corner.point).norm() <= reach_px) near_contours.push_back(line);
+      }
+    }
     for (size_t p = 0; p < planes.size(); ++p) {
       const SupportPlane& plane = planes[p];
       for (const Resting& r : resting) {

@@ -30,7 +30,9 @@
 // included) and matchedinimage-X (the share of the outline inside the image from which the matched
 // share is of that part only), no-rescue and rescue-X (poses short of the matched share turned down
 // unjudged; the evidence score that accepts them), no-occlusion (no second judgement of poses that
-// accepted recognitions partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits), refitrms-PX,
+// accepted recognitions partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits), no-contours
+// (no occluding contours: vision::RecognizerOptions::occlusion_contours), contourlen-PX, contourstep-GREY,
+// contourcover-X and contourshown-X (their limits), refitrms-PX,
 // refitcoverage-X, refitscore-X, refitinimage-X (the edge-point refit's limits; no-refit switches it off),
 // balance-N (the non-maximum suppression's pairwise margin; 0: off), ownlead-N and rankshare-X (its second
 // way to replace a rival; ownlead-0: off), inimagelead-X and tieshare-X (its third way, where neither own
@@ -498,6 +500,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "skip-any-claim") return o->skip_corners_claimed_by_any_model = true, std::nullopt;
   if (a == "matched-whole-edges") return o->matched_share_in_image = false, std::nullopt;
   if (a == "no-occlusion") return o->occlusion_reverify = false, std::nullopt;
+  if (a == "no-contours") return o->occlusion_contours = false, std::nullopt;
   if (a == "no-rescue") return o->matched_share_rescue = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
   const std::size_t dash = a.rfind('-');
@@ -533,6 +536,10 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"hiddenmin", [o](double v) { o->occlusion_min_hidden_share = v; }},
       {"shownmin", [o](double v) { o->occlusion_min_shown_share = v; }},
       {"hiddenscore", [o](double v) { o->occlusion_min_evidence_score = v; }},
+      {"contourlen", [o](double v) { o->contour_min_length_px = v; }},
+      {"contourcover", [o](double v) { o->contour_max_hidden_coverage = v; }},
+      {"contourstep", [o](double v) { o->contour_min_step_grey = v; }},
+      {"contourshown", [o](double v) { o->contour_min_shown_share = v; }},
       {"rescue", [o](double v) { o->matched_share_rescue_score = v; }},
 
       {"refitrms", [o](double v) { o->refit_max_rms_px = v; }},
@@ -549,14 +556,14 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, no-refit, skip-any-claim, "
-           "matched-whole-edges, no-occlusion, no-rescue, rescue-X, "
+           "matched-whole-edges, no-occlusion, no-contours, no-rescue, rescue-X, "
            "rules-only, index-N, "
            "support-N, "
            "contrast-X, "
            "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, eps-X, "
            "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
            "stepgrey-X, stepoffset-PX, alternatives-N, permodel-N, matchedinimage-X, refitrms-PX, "
-           "refitcoverage-X, refitscore-X, "
+           "refitcoverage-X, refitscore-X, contourlen-PX, contourcover-X, contourstep-GREY, contourshown-X, "
            "refitinimage-X, "
            "balance-N, ownlead-N, rankshare-X, inimagelead-X, tieshare-X, centreslack-MM)";
   }

@@ -295,6 +295,59 @@ struct JoinedLines {
   std::vector<ImageLine> extent;
 };
 JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines);
+// Occluding contours (contours.cc, RecognizerOptions::occlusion_contours): the image's straight
+// edges of at least options.contour_min_length_px, collinear pieces joined (JoinCollinearLines),
+// with a median grey-level step across them of at least options.contour_min_step_grey (a wood
+// grain line is no outline), each taken for the outline of something in front that the library
+// does not hold.
+std::vector<ImageLine> OccludingContours(const LineDetection& detection, const Camera& camera,
+                                         const RecognizerOptions& options);
+// A box's image: its vertices' pin-hole projections (undistorted px), their convex hull, and its
+// visible edges (VisibleBoxEdges).
+struct BoxImage {
+  BoxImage(const std::array<Eigen::Vector2d, 8>& vertices_px, uint16_t visible);
+  std::array<Eigen::Vector2d, 8> px;
+  uint16_t visible_edges = 0;
+  int hull[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // indices into px, counter-clockwise (y up)
+  int hull_size = 0;
+};
+// Whether a contour runs across a box's image: it must enter and leave the hull at least 4 px
+// inside its own ends, cross at least 10 px of it, and lie along none of the visible edges (both
+// ends of one within 3 px of its line).
+bool CrossesBoxImage(const ImageLine& contour, const BoxImage& box);
+// What contours hide: one side of a contour along its length, or the strip between two; samples
+// within kContourBandPx of a contour on the side in view count as hidden too (the contour's own edge
+// confounds their support).
+inline constexpr double kContourBandPx = 2, kContourEndPx = 3;
+struct ContourOccluder {
+  struct Side {
+    Eigen::Vector2d a = Eigen::Vector2d::Zero(), along = Eigen::Vector2d::UnitX(),
+                    toward_hidden = Eigen::Vector2d::UnitY();  // undistorted px; unit vectors
+    double length = 0;
+    bool Hides(const Eigen::Vector2d& px) const {
+      const Eigen::Vector2d d = px - a;
+      const double t = along.dot(d);
+      return t >= -kContourEndPx && t <= length + kContourEndPx && toward_hidden.dot(d) > -kContourBandPx;
+    }
+  };
+  std::array<Side, 2> sides;
+  int count = 0;  // 1: one side of sides[0]; 2: the strip between them
+  bool Hides(const Eigen::Vector2d& px) const {
+    return count > 0 && sides[0].Hides(px) && (count < 2 || sides[1].Hides(px));
+  }
+};
+// The ways the contours that run across a box's image (CrossesBoxImage) can hide part of it: either
+// side of each, and the strip between each two of them within 30 deg of parallel that do not meet
+// inside it.
+void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
+                       std::vector<ContourOccluder>* occlusions);
+// Whether the part of a pose in view leaves its model open: an end face of the box wholly hidden
+// by the occluder (its extent along that axis unseen) while another model of the library with the
+// same two other sides (within 2 mm), laid from the end in view, would end hidden as well (a bar
+// whose far end a contour hides is as much a longer block, or a shorter one). K: the pin-hole
+// intrinsics the occluder's pixels are in.
+bool AmbiguousExtent(const ModelLibrary& models, int model_index, const geometry::Pose3& camera_T_object,
+                     const ContourOccluder& occluder, const Eigen::Matrix3d& K);
 // The image direction (unit, undistorted px) in which a world point at pixel `px` moves when it
 // rises along the world's z axis (towards or away from the vertical vanishing point).
 Eigen::Vector2d UpImageDirection(const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world, const Eigen::Vector2d& px);
@@ -309,6 +362,8 @@ struct SupportHypothesis {
   double score = 0;                  // edge support along the visible predicted edges before any fit, 0..1
   int corner = 0;                    // into the corners
   int plane = 0;                     // into the planes
+  bool behind_contour = false;       // scored on the side of an occluding contour in view (the score
+                                     // times that side's share): its fit is judged only as hidden there
 };
 // The image segments that verified candidates matched, and the models of those candidates: a
 // hypothesis whose segments are all claimed is not fitted again (the index's groups: by any model;
@@ -369,7 +424,8 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
                                                  const LineDetection& detection,
                                                  const std::vector<ImageCorner>& corners,
                                                  const std::vector<SupportPlane>& planes,
-                                                 const RecognizerOptions& options);
+                                                 const RecognizerOptions& options,
+                                                 const std::vector<ImageLine>& contours = {});
 
 // Other models at a candidate's place: a wrong model fitted onto a real block (a plate on a slab, a
 // cube on one end of a bar) shares a bottom corner and the directions of its horizontal edges with

@@ -1,0 +1,211 @@
+// Occluding contours: long straight image lines taken for the outline of something in front of a
+// block that the model library does not hold (an arm, a hand, a tool; the benchmark's dark
+// cylinder). Where one runs across a pose's image, the outline on one side of it may be hidden
+// (RecognizerOptions::occlusion_contours): the support-plane source scores such placements on the
+// side in view, and the occlusion pass judges turned-down poses so.
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "teachsim/vision/recognition_stages.h"
+
+namespace teachsim::vision {
+
+namespace {
+
+float SmoothedGrey(const cv::Mat& m, const Eigen::Vector2d& p) {
+  const int x = std::clamp(static_cast<int>(std::lround(p.x())), 0, m.cols - 1);
+  const int y = std::clamp(static_cast<int>(std::lround(p.y())), 0, m.rows - 1);
+  return m.at<uint8_t>(y, x);
+}
+
+}  // namespace
+
+std::vector<ImageLine> OccludingContours(const LineDetection& detection, const Camera& camera,
+                                         const RecognizerOptions& options) {
+  constexpr int kProbes = 9;
+  constexpr double kOffsetPx = 4.5;
+  const Eigen::Matrix3d K_inv = camera.K().inverse();
+  const JoinedLines joined = JoinCollinearLines(detection.lines);
+  std::vector<ImageLine> out;
+  for (size_t l = 0; l < detection.lines.size(); ++l) {
+    if (joined.representative[l] != static_cast<int>(l)) continue;
+    const ImageLine& line = joined.extent[l];
+    const double length = line.Length();
+    if (length < options.contour_min_length_px) continue;
+    // The grey-level step across it (the smoothed, distorted image), its median over the probes.
+    const Eigen::Vector2d along = (line.b - line.a) / length, normal(-along.y(), along.x());
+    std::array<float, kProbes> steps{};
+    for (int k = 0; k < kProbes; ++k) {
+      const Eigen::Vector2d c = line.a + (k + 0.5) / kProbes * (line.b - line.a);
+      float grey[2] = {0, 0};
+      for (int side = 0; side < 2; ++side) {
+        const Eigen::Vector2d u = c + (side == 0 ? kOffsetPx : -kOffsetPx) * normal;
+        const auto px = camera.ProjectFromCamera(K_inv * Eigen::Vector3d(u.x(), u.y(), 1));
+        grey[side] = px ? SmoothedGrey(detection.edge_map.smoothed, *px) : 0;
+      }
+      steps[static_cast<size_t>(k)] = std::abs(grey[0] - grey[1]);
+    }
+    std::nth_element(steps.begin(), steps.begin() + kProbes / 2, steps.end());
+    if (steps[kProbes / 2] >= options.contour_min_step_grey) out.push_back(line);
+  }
+  return out;
+}
+
+BoxImage::BoxImage(const std::array<Eigen::Vector2d, 8>& vertices_px, uint16_t visible)
+    : px(vertices_px), visible_edges(visible) {
+  // The vertices' convex hull by gift wrapping (8 points), counter-clockwise in a y-up sense: every
+  // other vertex to the left of each hull edge.
+  int start = 0;
+  for (int i = 1; i < 8; ++i) {
+    if (px[i].x() < px[start].x() || (px[i].x() == px[start].x() && px[i].y() < px[start].y())) start = i;
+  }
+  int current = start;
+  do {
+    hull[hull_size++] = current;
+    int next = (current + 1) % 8;
+    for (int i = 0; i < 8; ++i) {
+      const Eigen::Vector2d a = px[next] - px[current], b = px[i] - px[current];
+      const double cross = a.x() * b.y() - a.y() * b.x();
+      if (cross < 0 || (cross == 0 && b.squaredNorm() > a.squaredNorm())) next = i;
+    }
+    current = next;
+  } while (current != start && hull_size < 8);
+}
+
+bool CrossesBoxImage(const ImageLine& contour, const BoxImage& box) {
+  constexpr double kBeyondPx = 4, kMinInsidePx = 10, kOwnEdgePx = 3;
+  const double length = contour.Length();
+  if (!(length > 2 * kBeyondPx + kMinInsidePx) || box.hull_size < 3) return false;
+  const Eigen::Vector2d along = (contour.b - contour.a) / length, normal(-along.y(), along.x());
+  // Quick refusal: the box's image lies wholly on one side of the line.
+  bool left = false, right = false;
+  for (int i = 0; i < box.hull_size; ++i) {
+    const double side = normal.dot(box.px[static_cast<size_t>(box.hull[i])] - contour.a);
+    left = left || side > 0, right = right || side < 0;
+  }
+  if (!left || !right) return false;
+  // Where the line enters and leaves the hull (Cyrus-Beck; inward is to the left of each edge).
+  double t_in = -std::numeric_limits<double>::infinity(), t_out = -t_in;
+  for (int i = 0; i < box.hull_size; ++i) {
+    const Eigen::Vector2d& p = box.px[static_cast<size_t>(box.hull[i])];
+    const Eigen::Vector2d e = box.px[static_cast<size_t>(box.hull[(i + 1) % box.hull_size])] - p;
+    const Eigen::Vector2d inward(-e.y(), e.x());
+    const double num = inward.dot(contour.a - p), den = inward.dot(along);
+    if (std::abs(den) < 1e-12) {
+      if (num < 0) return false;
+    } else if (den > 0) {
+      t_in = std::max(t_in, -num / den);
+    } else {
+      t_out = std::min(t_out, -num / den);
+    }
+  }
+  if (!(t_out - t_in >= kMinInsidePx) || t_in < kBeyondPx || t_out > length - kBeyondPx) return false;
+  // None of the box's own visible edges.
+  for (int e = 0; e < 12; ++e) {
+    if (!(box.visible_edges >> e & 1)) continue;
+    if (std::abs(normal.dot(box.px[kBoxEdges[e][0]] - contour.a)) < kOwnEdgePx &&
+        std::abs(normal.dot(box.px[kBoxEdges[e][1]] - contour.a)) < kOwnEdgePx) {
+      return false;
+    }
+  }
+  return true;
+}
+
+namespace {
+
+ContourOccluder::Side SideOf(const ImageLine& contour, const Eigen::Vector2d& toward) {
+  ContourOccluder::Side side;
+  side.a = contour.a;
+  side.length = contour.Length();
+  side.along = (contour.b - contour.a) / side.length;
+  side.toward_hidden = Eigen::Vector2d(-side.along.y(), side.along.x());
+  if (side.toward_hidden.dot(toward) < 0) side.toward_hidden = -side.toward_hidden;
+  return side;
+}
+
+}  // namespace
+
+void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
+                       std::vector<ContourOccluder>* occlusions) {
+  std::vector<ContourOccluder>& out = *occlusions;
+  out.clear();
+  thread_local std::vector<const ImageLine*> crossing;
+  crossing.clear();
+  for (const ImageLine& c : contours) {
+    if (CrossesBoxImage(c, box)) crossing.push_back(&c);
+  }
+  for (const ImageLine* c : crossing) {
+    const Eigen::Vector2d d = c->b - c->a, normal(-d.y(), d.x());
+    for (double sign : {1.0, -1.0}) {
+      ContourOccluder o;
+      o.sides[0] = SideOf(*c, sign * normal);
+      o.count = 1;
+      out.push_back(o);
+    }
+  }
+  const double min_cos = std::cos(30 * M_PI / 180);
+  for (size_t i = 0; i < crossing.size(); ++i) {
+    for (size_t j = i + 1; j < crossing.size(); ++j) {
+      const ImageLine& p = *crossing[i];
+      const ImageLine& q = *crossing[j];
+      const Eigen::Vector2d dp = (p.b - p.a).normalized(), dq = (q.b - q.a).normalized();
+      if (std::abs(dp.dot(dq)) < min_cos) continue;
+      // Each wholly on one side of the other (they do not meet where they are).
+      const Eigen::Vector2d np(-dp.y(), dp.x()), nq(-dq.y(), dq.x());
+      const double qa = np.dot(q.a - p.a), qb = np.dot(q.b - p.a);
+      const double pa = nq.dot(p.a - q.a), pb = nq.dot(p.b - q.a);
+      if (qa * qb <= 0 || pa * pb <= 0) continue;
+      ContourOccluder o;
+      o.sides[0] = SideOf(p, 0.5 * (q.a + q.b) - p.a);
+      o.sides[1] = SideOf(q, 0.5 * (p.a + p.b) - q.a);
+      o.count = 2;
+      out.push_back(o);
+    }
+  }
+}
+
+bool AmbiguousExtent(const ModelLibrary& models, int model_index, const geometry::Pose3& camera_T_object,
+                     const ContourOccluder& occluder, const Eigen::Matrix3d& K) {
+  const Eigen::Vector3d& s = models.models[static_cast<size_t>(model_index)].box_size_m;
+  auto hidden = [&](const Eigen::Vector3d& in_object) {
+    const Eigen::Vector3d p = camera_T_object * in_object;
+    return p.z() > 1e-3 && occluder.Hides((K * p).hnormalized());
+  };
+  // The four corners of the face across axis k at `at` along it.
+  auto face_hidden = [&](int k, double at) {
+    const int i = (k + 1) % 3, j = (k + 2) % 3;
+    for (int c = 0; c < 4; ++c) {
+      Eigen::Vector3d v;
+      v[k] = at;
+      v[i] = (c & 1 ? 0.5 : -0.5) * s[i];
+      v[j] = (c & 2 ? 0.5 : -0.5) * s[j];
+      if (!hidden(v)) return false;
+    }
+    return true;
+  };
+  constexpr double kSameM = 0.002;
+  for (int k = 0; k < 3; ++k) {
+    const int i = (k + 1) % 3, j = (k + 2) % 3;
+    for (double sign : {1.0, -1.0}) {
+      if (!face_hidden(k, sign * 0.5 * s[k])) continue;
+      for (size_t m = 0; m < models.models.size(); ++m) {
+        if (static_cast<int>(m) == model_index) continue;
+        const Eigen::Vector3d& t = models.models[m].box_size_m;
+        for (int kk = 0; kk < 3; ++kk) {
+          const double a = t[(kk + 1) % 3], b = t[(kk + 2) % 3];
+          const bool same_sides = (std::abs(a - s[i]) < kSameM && std::abs(b - s[j]) < kSameM) ||
+                                  (std::abs(a - s[j]) < kSameM && std::abs(b - s[i]) < kSameM);
+          if (!same_sides || std::abs(t[kk] - s[k]) < kSameM) continue;
+          // Laid from the end in view (at -sign s_k / 2): its far end face.
+          if (face_hidden(k, -sign * 0.5 * s[k] + sign * t[kk])) return true;
+        }
+      }
+    }
+  }
+  return false;
+}
+
+}  // namespace teachsim::vision

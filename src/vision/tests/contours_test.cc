@@ -1,0 +1,122 @@
+// Occluding contours (contours.cc): which image lines count as one, when one runs across a box's
+// image, and what one or two of them hide.
+#include <gtest/gtest.h>
+
+#include <opencv2/imgproc.hpp>
+
+#include "synthetic_scene.h"
+#include "teachsim/vision/recognition_stages.h"
+
+namespace teachsim::vision {
+namespace {
+
+// A box's image: a 100 x 60 px rectangle (the far face) with a copy 10 px up and right (the near
+// face), its outline edges all visible.
+BoxImage Rectangle() {
+  std::array<Eigen::Vector2d, 8> px;
+  for (int v = 0; v < 8; ++v) {
+    px[static_cast<size_t>(v)] = Eigen::Vector2d(200 + (v & 1 ? 100 : 0), 200 + (v & 2 ? 60 : 0));
+    if (v & 4) px[static_cast<size_t>(v)] += Eigen::Vector2d(10, -10);
+  }
+  return BoxImage(px, 0x0fff);
+}
+
+TEST(ContoursTest, ALineCrossesABoxImageOnlyWhenItRunsAcrossAllOfIt) {
+  const BoxImage box = Rectangle();
+  // The hull: the two rectangles' outer corners, six of the eight vertices.
+  EXPECT_EQ(box.hull_size, 6);
+  EXPECT_TRUE(CrossesBoxImage({{250, 100}, {250, 400}}, box));   // top to bottom, past both sides
+  EXPECT_TRUE(CrossesBoxImage({{250, 400}, {250, 100}}, box));   // either direction
+  EXPECT_TRUE(CrossesBoxImage({{150, 150}, {350, 300}}, box));   // slanted
+  EXPECT_FALSE(CrossesBoxImage({{250, 100}, {250, 230}}, box));  // ends inside
+  EXPECT_FALSE(CrossesBoxImage({{250, 192}, {250, 400}}, box));  // ends 2 px before the outline
+  EXPECT_FALSE(CrossesBoxImage({{400, 100}, {400, 400}}, box));  // beside it
+  EXPECT_FALSE(CrossesBoxImage({{100, 50}, {400, 50}}, box));    // above it
+  // Along one of its own edges (the far face's bottom edge, y = 260): no occluder.
+  EXPECT_FALSE(CrossesBoxImage({{150, 260}, {400, 260}}, box));
+  EXPECT_FALSE(CrossesBoxImage({{150, 261.5}, {400, 261.5}}, box));
+  // A short line never does.
+  EXPECT_FALSE(CrossesBoxImage({{250, 225}, {250, 241}}, box));
+}
+
+TEST(ContoursTest, OneContourHidesEitherSideAndTwoTheStripBetweenThem) {
+  const BoxImage box = Rectangle();
+  std::vector<ContourOccluder> ways;
+  ContourOcclusions({{{240, 100}, {240, 400}}}, box, &ways);
+  ASSERT_EQ(ways.size(), 2u);
+  for (const ContourOccluder& o : ways) EXPECT_EQ(o.count, 1);
+  EXPECT_NE(ways[0].Hides({220, 230}), ways[1].Hides({220, 230}));
+  EXPECT_NE(ways[0].Hides({260, 230}), ways[1].Hides({260, 230}));
+  // Along the contour's length only, and a band of kContourBandPx on the side in view.
+  for (const ContourOccluder& o : ways) {
+    EXPECT_FALSE(o.Hides({260, 50}));
+    EXPECT_FALSE(o.Hides({220, 450}));
+    EXPECT_TRUE(o.Hides({241, 230}) && o.Hides({239, 230}));
+  }
+
+  // Two nearly parallel contours: either side of each, and the strip between them.
+  ContourOcclusions({{{240, 100}, {240, 400}}, {{270, 100}, {275, 400}}}, box, &ways);
+  ASSERT_EQ(ways.size(), 5u);
+  const ContourOccluder& strip = ways.back();
+  EXPECT_EQ(strip.count, 2);
+  EXPECT_TRUE(strip.Hides({255, 230}));
+  EXPECT_FALSE(strip.Hides({220, 230}));
+  EXPECT_FALSE(strip.Hides({290, 230}));
+  // Contours that cross each other where they are give no strip; nor do ones far from parallel.
+  ContourOcclusions({{{240, 100}, {280, 400}}, {{280, 100}, {240, 400}}}, box, &ways);
+  EXPECT_EQ(ways.size(), 4u);
+  ContourOcclusions({{{240, 100}, {240, 400}}, {{150, 150}, {350, 300}}}, box, &ways);
+  EXPECT_EQ(ways.size(), 4u);
+}
+
+TEST(ContoursTest, OnlyLongStepEdgesAreOccludingContours) {
+  const Camera camera = synthetic::SyntheticCamera();
+  cv::Mat image(camera.height(), camera.width(), CV_8U, cv::Scalar(150));
+  cv::rectangle(image, cv::Point(300, 0), cv::Point(339, 479), cv::Scalar(20), cv::FILLED);  // a dark pole
+  cv::rectangle(image, cv::Point(100, 100), cv::Point(139, 139), cv::Scalar(20),
+                cv::FILLED);                                                    // a small square
+  cv::line(image, cv::Point(450, 50), cv::Point(450, 400), cv::Scalar(60), 1);  // a thin line
+  RecognizerOptions options;
+  const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+  const std::vector<ImageLine> contours = OccludingContours(detection, camera, options);
+  // The pole's two sides, nothing else: the square's sides are short, the thin line has no step.
+  ASSERT_EQ(contours.size(), 2u) << detection.lines.size() << " lines";
+  for (const ImageLine& c : contours) {
+    EXPECT_GT(c.Length(), 400);
+    const double x = 0.5 * (c.a.x() + c.b.x());
+    EXPECT_TRUE(std::abs(x - 299.5) < 2 || std::abs(x - 339.5) < 2) << x;
+  }
+  options.contour_min_step_grey = 0;  // the thin line too (an edge either side of it)
+  const size_t with_line = OccludingContours(detection, camera, options).size();
+  EXPECT_GE(with_line, 3u);
+  options.contour_min_length_px = 30;  // and the square's four sides
+  EXPECT_EQ(OccludingContours(detection, camera, options).size(), with_line + 4);
+}
+
+// A contour hiding everything right of a vertical line at x_px (pin-hole pixels).
+ContourOccluder RightOf(double x_px) {
+  ContourOccluder o;
+  o.sides[0] = {{x_px, 0}, {0, 1}, {1, 0}, 480};
+  o.count = 1;
+  return o;
+}
+
+TEST(ContoursTest, AHiddenEndLeavesTheModelOpenWhenAnotherWouldEndHiddenToo) {
+  const Eigen::Matrix3d K = (Eigen::Matrix3d() << 500, 0, 320, 0, 500, 240, 0, 0, 1).finished();
+  const Model bar{"bar90", {0.09, 0.045, 0.045}}, cube{"cube45", {0.045, 0.045, 0.045}};
+  const Model tall{"tall135", {0.045, 0.045, 0.135}}, slab{"slab", {0.09, 0.06, 0.03}};
+  // The bar across the view 0.5 m away: its ends at x = 275 and 365 px, its middle at 320 px.
+  const geometry::Pose3 pose(Eigen::Quaterniond::Identity(), {0, 0, 0.5});
+  // Its right end hidden from 345 px on: a cube laid from the left end would end in view at 320 px,
+  // a tall block (135 mm on its side) hidden at 410 px.
+  EXPECT_FALSE(AmbiguousExtent({{bar, cube}}, 0, pose, RightOf(345), K));
+  EXPECT_TRUE(AmbiguousExtent({{bar, cube, tall}}, 0, pose, RightOf(345), K));
+  EXPECT_FALSE(AmbiguousExtent({{bar, slab}}, 0, pose, RightOf(345), K));  // other sides
+  // Hidden from 315 px on, the cube would end hidden too.
+  EXPECT_TRUE(AmbiguousExtent({{bar, cube}}, 0, pose, RightOf(315), K));
+  // Neither end wholly hidden: the bar's length is seen.
+  EXPECT_FALSE(AmbiguousExtent({{bar, cube, tall}}, 0, pose, RightOf(400), K));
+}
+
+}  // namespace
+}  // namespace teachsim::vision
