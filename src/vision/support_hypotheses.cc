@@ -162,11 +162,16 @@ double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& cam
 // are wrong and show it anywhere along their outline; the coarse threshold was 0.2 under the fine
 // one: at 0.05 under it, the same blocks are found on the renders of seeds 7-9 and the support-plane
 // stage takes 12 ms per image instead of 19), then every 3 px. Below options.support_min_score: -1.
+// With coarse_floor below the coarse threshold, *coarse is the coarse pass's support when it reaches
+// coarse_floor (0 when not).
 double PlacementSupport(const Eigen::Vector3d& size_m, const Camera& camera,
                         const geometry::Pose3& camera_T_object, const EdgeMap& edge_map,
-                        const RecognizerOptions& options) {
+                        const RecognizerOptions& options, double coarse_floor = 1, double* coarse = nullptr) {
   const double coarse_min = options.support_min_score - 0.05;
-  if (QuickSupport(size_m, camera, camera_T_object, edge_map, 12, coarse_min) < coarse_min) return -1;
+  const double quick =
+      QuickSupport(size_m, camera, camera_T_object, edge_map, 12, std::min(coarse_floor, coarse_min));
+  if (coarse != nullptr) *coarse = quick;
+  if (quick < coarse_min) return -1;
   const double score = QuickSupport(size_m, camera, camera_T_object, edge_map, 3, options.support_min_score);
   return score >= options.support_min_score ? score : -1;
 }
@@ -398,8 +403,14 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     h.world_T_object = geometry::Pose3(Eigen::Quaterniond(rotation).normalized(), middle);
     const geometry::Pose3 camera_T_object = camera_T_world * h.world_T_object;
     if (!(camera_T_object.translation.z() > 0.05) || !scored.Insert(r.model, h.world_T_object)) return;
-    h.score = PlacementSupport(s, camera, camera_T_object, detection.edge_map, options);
-    if (h.score < 0 && !near_contours.empty()) {
+    // Behind a contour, the coarse support of the side in view must be at least support_min_score
+    // - 0.1 on at least contour_min_shown_share of the samples (OccludedPlacementSupport): of all the
+    // samples, at least the product, which the unaided coarse pass tells at once.
+    const double occluded_floor = (options.support_min_score - 0.1) * options.contour_min_shown_share;
+    double coarse = 0;
+    h.score = PlacementSupport(s, camera, camera_T_object, detection.edge_map, options,
+                               near_contours.empty() ? 1.0 : occluded_floor, &coarse);
+    if (h.score < 0 && !near_contours.empty() && coarse >= occluded_floor) {
       h.score =
           OccludedPlacementSupport(s, camera, K, camera_T_object, detection.edge_map, near_contours, options);
       h.behind_contour = true;
