@@ -150,7 +150,7 @@ double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& cam
     return best;
   };
   // Coarse samples first (as PlacementSupport), then every 3 px. Ranked as the whole outline would
-  // be were the hidden part unsupported: after every placement that reached the threshold unaided.
+  // be were the hidden part unsupported: below the placements in full view that support as well.
   double shown_share = 0;
   if (best_side(12, options.support_min_score - 0.1, &shown_share) < 0) return -1;
   shown_share = 0;

@@ -149,14 +149,16 @@ struct RecognizerOptions {
   // little edge support (at most contour_max_hidden_coverage of its samples), at least
   // occlusion_min_hidden_share of it hidden and contour_min_shown_share in view. Two uses: the
   // support-plane source scores a placement short of support_min_score again on the outline in view
-  // (ranked by that score times the share in view, after all others; its fit is judged only as hidden
-  // so), and the occlusion pass judges each pose verification turned down again on it, as above. A
+  // (ranked by that score times the share in view among the others; its fit is judged only as
+  // hidden so), and the occlusion pass judges each pose verification turned down again on it, as above. A
   // pose so accepted must not go on past the occluder (an edge into the hidden part, continued over
   // its length beyond its end, finds no step edge along 20 px: a cube fitted to one end of a bar
   // whose middle is hidden), and its model must be the only one the part in view allows (no end face
   // wholly hidden where another model with the same two other sides would end hidden too).
-  // Render seeds 7-30 (1440 images), against none: found >= 0.7 visible 4351 -> 4361, 0.4-0.7
-  // 114 -> 132, < 0.4 8 -> 8, false detections 46 -> 48 (docs/benchmarks.md, session 36).
+  // Render seeds 7-30 (1440 images, where it was chosen), against none: found >= 0.7 visible 4351 ->
+  // 4361, 0.4-0.7 114 -> 132, < 0.4 4 -> 8, false detections 46 -> 48; held out, seeds 31-71: 7229 ->
+  // 7236, 186 -> 213, 8 -> 13, 130 -> 131; about a fifth more time per image (docs/benchmarks.md,
+  // session 36).
   bool occlusion_contours = true;
   double contour_min_length_px = 60;
   double contour_min_step_grey = 30;
