@@ -537,18 +537,18 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o = RecognizerOptions();
   o.occlusion_min_shown_share = 2;
   EXPECT_NE(o.Validate().message().find("occlusion_min_shown_share"), std::string::npos);
-  o = RecognizerOptions();
-  o.contour_min_length_px = 0;
-  EXPECT_NE(o.Validate().message().find("contour_min_length_px"), std::string::npos);
-  o = RecognizerOptions();
-  o.contour_min_step_grey = -1;
-  EXPECT_NE(o.Validate().message().find("contour_min_step_grey"), std::string::npos);
-  o = RecognizerOptions();
-  o.contour_max_hidden_coverage = 1.5;
-  EXPECT_NE(o.Validate().message().find("contour_max_hidden_coverage"), std::string::npos);
-  o = RecognizerOptions();
-  o.contour_min_shown_share = -0.5;
-  EXPECT_NE(o.Validate().message().find("contour_min_shown_share"), std::string::npos);
+  // The occluding contours' limits.
+  const std::pair<const char*, void (*)(RecognizerOptions&)> contour_limits[] = {
+      {"contour_min_length_px", [](RecognizerOptions& r) { r.contour_min_length_px = 0; }},
+      {"contour_min_step_grey", [](RecognizerOptions& r) { r.contour_min_step_grey = -1; }},
+      {"contour_max_hidden_coverage", [](RecognizerOptions& r) { r.contour_max_hidden_coverage = 1.5; }},
+      {"contour_min_shown_share", [](RecognizerOptions& r) { r.contour_min_shown_share = -0.5; }},
+  };
+  for (const auto& [field, set] : contour_limits) {
+    o = RecognizerOptions();
+    set(o);
+    EXPECT_NE(o.Validate().message().find(field), std::string::npos) << field;
+  }
   o = RecognizerOptions();
   o.accept_evidence_score = 0.1;  // below min_evidence_score
   EXPECT_NE(o.Validate().message().find("accept_evidence_score = 0.1 must be >= min_evidence_score"),
