@@ -1084,8 +1084,10 @@ class RecognitionPass {
   // 5b. Blocks partly hidden by recognized ones (RecognizerOptions::occlusion_reverify): each pose
   // verification turned down is judged again without the outline the accepted recognitions hide and
   // without the image lines they claim (their edges end where a hidden block's do not). Those that
-  // pass, best ranked first, join the accepted ones unless they conflict with one.
-  void ReverifyOccluded(std::vector<size_t>* accepted_io);
+  // pass, best ranked first, join the accepted ones unless they conflict with one. Then, as much, the
+  // outline that occluding contours hide (RecognizerOptions::occlusion_contours): `contours`, or
+  // found here when null.
+  void ReverifyOccluded(std::vector<size_t>* accepted_io, const std::vector<ImageLine>* contours);
 
   const std::vector<Candidate>& candidates() const { return candidates_; }
 
@@ -1464,7 +1466,8 @@ std::vector<size_t> RecognitionPass::Select() {
   return SupportedSubset(accepted);
 }
 
-void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io) {
+void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
+                                       const std::vector<ImageLine>* found_contours) {
   std::vector<size_t>& accepted = *accepted_io;
   if (!options_.occlusion_reverify || rejected_.empty()) return;
   // Which occluders can hide part of a pose: those whose boxes' images (pin-hole projections: a
@@ -1511,9 +1514,10 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io) {
     free_lines.push_back(lines_[l]);
     free_index.push_back(static_cast<int>(l));
   }
-  const std::vector<ImageLine> contours = options_.occlusion_contours
-                                              ? OccludingContours(detection_, camera_, options_)
-                                              : std::vector<ImageLine>{};
+  const std::vector<ImageLine> contours = !options_.occlusion_contours ? std::vector<ImageLine>{}
+                                          : found_contours != nullptr
+                                              ? *found_contours
+                                              : OccludingContours(detection_, camera_, options_);
   // A pose judged again with `hiding` leaving out part of its outline (`hidden` of its samples in
   // the image): the matched share over the outline in view, without the lines accepted recognitions
   // claim; the rules, and the occlusion pass's evidence score.
@@ -1663,13 +1667,16 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   // hypotheses, then other models at each candidate's place.
   RecognitionPass pass(models_, options_, camera, detection, fixed, fixed_edges, trace);
   double support_ms = 0;  // proposing the support-plane hypotheses (their fits count in fit_verify)
+  std::vector<ImageLine> contours;  // occluding contours, found with the support-plane hypotheses
+  bool contours_found = false;
   if (options_.support_hypotheses) {
     const std::vector<SupportPlane> planes = SupportPlanes(fixed, options_);
     const auto ts = Clock::now();
     const std::vector<ImageCorner> corners = FindCorners(lines, options_);
-    const std::vector<ImageLine> contours = options_.occlusion_reverify && options_.occlusion_contours
-                                                ? OccludingContours(detection, camera, options_)
-                                                : std::vector<ImageLine>{};
+    if (options_.occlusion_reverify && options_.occlusion_contours) {
+      contours = OccludingContours(detection, camera, options_);
+      contours_found = true;
+    }
     const std::vector<SupportHypothesis> support_hypotheses =
         SupportHypotheses(models_, camera, detection, corners, planes, options_, contours);
     support_ms = Ms(ts, Clock::now());
@@ -1686,7 +1693,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   // 5. consistency and non-maximum suppression; 5b. blocks partly hidden by the accepted ones.
   std::vector<size_t> accepted = pass.Select();
   const auto t_occlusion = Clock::now();
-  pass.ReverifyOccluded(&accepted);
+  pass.ReverifyOccluded(&accepted, contours_found ? &contours : nullptr);
   const double occlusion_ms = Ms(t_occlusion, Clock::now());
 
   // 6. the accepted candidates as recognitions in the world frame, then the model editor's rules (§4.3).
