@@ -157,7 +157,7 @@ struct RecognizerOptions {
   // wholly hidden where another model with the same two other sides would end hidden too).
   // Render seeds 7-30 (1440 images, where it was chosen), against none: found >= 0.7 visible 4351 ->
   // 4361, 0.4-0.7 114 -> 132, < 0.4 4 -> 8, false detections 46 -> 48; held out, seeds 31-71: 7229 ->
-  // 7236, 186 -> 213, 8 -> 13, 130 -> 131; about a fifth more time per image (docs/benchmarks.md,
+  // 7236, 186 -> 213, 8 -> 13, 130 -> 131; about a sixth more time per image (docs/benchmarks.md,
   // session 36).
   bool occlusion_contours = true;
   double contour_min_length_px = 60;
