@@ -469,50 +469,6 @@ HiddenOutline HiddenOutlineShare(const Model& model, const Camera& camera,
   return out;
 }
 
-// Whether a pose hidden in part by a contour occluder goes on past it: an edge that runs from the
-// outline in view into the hidden part, continued past its hidden end over its own length, finds
-// image edges with a grey-level step across them (the step rule's) along kContinuedRunPx or more in
-// a row. A block whose middle is hidden shows its far end beyond the occluder; a smaller model fitted
-// to the near end (a cube at a bar's end) would otherwise pass as hidden there too.
-constexpr double kContinuedRunPx = 20;
-bool ContinuesPastHiddenEnd(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
-                            const ContourOccluder& occluder, const EdgeMap& edge_map,
-                            const RecognizerOptions& options) {
-  const Eigen::Matrix3d K = camera.K();
-  const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
-  for (int e = 0; e < 12; ++e) {
-    if (!(visible >> e & 1)) continue;
-    const Eigen::Vector3d p = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][0]);
-    const Eigen::Vector3d q = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][1]);
-    if (!(p.z() > 1e-3) || !(q.z() > 1e-3)) continue;
-    const bool p_hidden = occluder.Hides((K * p).hnormalized()),
-               q_hidden = occluder.Hides((K * q).hnormalized());
-    if (p_hidden == q_hidden) continue;
-    const Eigen::Vector3d from = p_hidden ? p : q,
-                          step = p_hidden ? Eigen::Vector3d(p - q) : Eigen::Vector3d(q - p);
-    const auto a = camera.ProjectFromCamera(from), b = camera.ProjectFromCamera(from + step);
-    if (!a || !b) continue;
-    const int n = static_cast<int>((*b - *a).norm() / kOutlineSpacingPx);
-    int run = 0;
-    for (int i = 1; i <= n; ++i) {
-      const double t = static_cast<double>(i) / n;
-      const auto c = camera.ProjectFromCamera(from + t * step),
-                 c2 = camera.ProjectFromCamera(from + (t + 0.01) * step);
-      if (!c || !c2 || !camera.InImage(*c)) {
-        run = 0;
-        continue;
-      }
-      const Eigen::Vector2d along = (*c2 - *c).normalized(), normal(-along.y(), along.x());
-      const bool supported =
-          EdgeAcross(edge_map, *c, normal) &&
-          GreyStepAcross(edge_map, *c, normal, options.step_offset_px) >= options.min_step_grey;
-      run = supported ? run + 1 : 0;
-      if (run * kOutlineSpacingPx >= kContinuedRunPx) return true;
-    }
-  }
-  return false;
-}
-
 // The evidence for a pose (what verification decides on): matched lines and their residuals, and
 // edge support sample by sample along the visible predicted edges (distorted image): a sample is
 // supported by a Canny edge within 2 px across the edge whose gradient is across the edge. Where the
@@ -616,6 +572,45 @@ bool RestsOnTable(const Model& model, const geometry::Pose3& world_T_object, dou
 }
 
 }  // namespace
+
+bool ContinuesPastHiddenEnd(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                            const ContourOccluder& occluder, const EdgeMap& edge_map,
+                            const RecognizerOptions& options) {
+  constexpr double kRunPx = 20;
+  const Eigen::Matrix3d K = camera.K();
+  const uint16_t visible = VisibleBoxEdges(model.box_size_m, camera_T_object.Inverse().translation);
+  for (int e = 0; e < 12; ++e) {
+    if (!(visible >> e & 1)) continue;
+    const Eigen::Vector3d p = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][0]);
+    const Eigen::Vector3d q = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[e][1]);
+    if (!(p.z() > 1e-3) || !(q.z() > 1e-3)) continue;
+    const bool p_hidden = occluder.Hides((K * p).hnormalized()),
+               q_hidden = occluder.Hides((K * q).hnormalized());
+    if (p_hidden == q_hidden) continue;
+    const Eigen::Vector3d from = p_hidden ? p : q,
+                          step = p_hidden ? Eigen::Vector3d(p - q) : Eigen::Vector3d(q - p);
+    const auto a = camera.ProjectFromCamera(from), b = camera.ProjectFromCamera(from + step);
+    if (!a || !b) continue;
+    const int n = static_cast<int>((*b - *a).norm() / kOutlineSpacingPx);
+    int run = 0;
+    for (int i = 1; i <= n; ++i) {
+      const double t = static_cast<double>(i) / n;
+      const auto c = camera.ProjectFromCamera(from + t * step),
+                 c2 = camera.ProjectFromCamera(from + (t + 0.01) * step);
+      if (!c || !c2 || !camera.InImage(*c)) {
+        run = 0;
+        continue;
+      }
+      const Eigen::Vector2d along = (*c2 - *c).normalized(), normal(-along.y(), along.x());
+      const bool supported =
+          EdgeAcross(edge_map, *c, normal) &&
+          GreyStepAcross(edge_map, *c, normal, options.step_offset_px) >= options.min_step_grey;
+      run = supported ? run + 1 : 0;
+      if (run * kOutlineSpacingPx >= kRunPx) return true;
+    }
+  }
+  return false;
+}
 
 FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& camera) {
   FixedEdgeMap out;
@@ -1103,14 +1098,18 @@ class RecognitionPass {
                      const geometry::Pose3& camera_T_object) const;
   // Culling (§7.1): outside the work site, under the table, inside a fixed object.
   bool Implausible(const Model& model, const geometry::Pose3& camera_T_object) const;
+  // How a fitted pose is judged: on its whole outline, or only as partly hidden (a placement scored
+  // behind an occluding contour: a block in full view has its own hypotheses).
+  enum class Judged { kWhole, kOnlyHidden };
   // Verification and culling of a fitted pose: a candidate when it passes; turned down for want of
-  // evidence, kept for ReverifyOccluded.
-  void Verify(int model_index, FitResult fit, RecognitionTrace::Fitted* traced);
+  // evidence (at once when judged only hidden), kept for ReverifyOccluded.
+  void Verify(int model_index, FitResult fit, RecognitionTrace::Fitted* traced, Judged judged);
   // A hypothesis' fit: its rounds and final pose into its trace entry; verified unless it failed.
-  void VerifyFitted(int model_index, const HypothesisFit& fitted, RecognitionTrace::Fitted* traced);
+  void VerifyFitted(int model_index, const HypothesisFit& fitted, RecognitionTrace::Fitted* traced,
+                    Judged judged);
   // A hypothesis of a block resting on a plane (support-plane or alternative; `kind` for the trace):
   // fitted on the plane (FitSupportHypothesis), then verified.
-  void FitOnSupport(int model_index, int kind, const geometry::Pose3& initial);
+  void FitOnSupport(int model_index, int kind, const geometry::Pose3& initial, Judged judged);
   // Culling what floats (§7.1: poses that cannot be real): each recognition rests on the table, or
   // stands on fixed objects' tops or other recognitions' tops (StandsOnSupports: its centre over where
   // it touches them; checked until nothing changes). Applied to all candidates before the non-maximum
@@ -1140,7 +1139,6 @@ class RecognitionPass {
   std::vector<Candidate> candidates_;
   std::vector<double> rank_;  // of each candidate in the selection
   std::vector<Rejected> rejected_;
-  bool hidden_only_ = false;  // the fit being verified is of a placement behind a contour
 };
 
 bool RecognitionPass::AlreadyTried(int model_index, const geometry::Pose3& initial) {
@@ -1186,7 +1184,8 @@ bool RecognitionPass::Implausible(const Model& model, const geometry::Pose3& cam
   return false;
 }
 
-void RecognitionPass::Verify(int model_index, FitResult fit, RecognitionTrace::Fitted* traced) {
+void RecognitionPass::Verify(int model_index, FitResult fit, RecognitionTrace::Fitted* traced,
+                             Judged judged) {
   const Model& model = models_.models[static_cast<size_t>(model_index)];
   auto reject = [&](Outcome outcome) {
     if (traced != nullptr) traced->outcome = outcome;
@@ -1195,7 +1194,7 @@ void RecognitionPass::Verify(int model_index, FitResult fit, RecognitionTrace::F
           {model_index, fit, traced != nullptr ? static_cast<int>(trace_->fitted.size()) - 1 : -1});
     }
   };
-  if (hidden_only_) return reject(Outcome::kSupport);
+  if (judged == Judged::kOnlyHidden) return reject(Outcome::kSupport);
   EdgeMatchSet set =
       MatchEdges(model, K_, fit.camera_T_object, lines_, options_.match_distance_px, match_angle_);
   // Short of the matched share, a pose is judged on its evidence only with the rescue on
@@ -1269,19 +1268,20 @@ void RecognitionPass::Verify(int model_index, FitResult fit, RecognitionTrace::F
 }
 
 void RecognitionPass::VerifyFitted(int model_index, const HypothesisFit& fitted,
-                                   RecognitionTrace::Fitted* traced) {
+                                   RecognitionTrace::Fitted* traced, Judged judged) {
   if (traced != nullptr) {
     traced->rounds.insert(traced->rounds.end(), fitted.rounds.begin(), fitted.rounds.end());
     traced->camera_T_object = fitted.fit.camera_T_object;
   }
-  if (!fitted.failed) Verify(model_index, fitted.fit, traced);
+  if (!fitted.failed) Verify(model_index, fitted.fit, traced, judged);
 }
 
-void RecognitionPass::FitOnSupport(int model_index, int kind, const geometry::Pose3& initial) {
+void RecognitionPass::FitOnSupport(int model_index, int kind, const geometry::Pose3& initial, Judged judged) {
   RecognitionTrace::Fitted* traced = StartTrace(model_index, kind, initial);
   const Model& model = models_.models[static_cast<size_t>(model_index)];
   VerifyFitted(model_index,
-               FitSupportHypothesis(model, K_, camera_.camera_T_world(), initial, lines_, options_), traced);
+               FitSupportHypothesis(model, K_, camera_.camera_T_world(), initial, lines_, options_), traced,
+               judged);
 }
 
 void RecognitionPass::FitSupportHypotheses(const std::vector<ImageCorner>& corners,
@@ -1296,11 +1296,7 @@ void RecognitionPass::FitSupportHypotheses(const std::vector<ImageCorner>& corne
     }
     const geometry::Pose3 initial = camera_T_world * h.world_T_object;
     if (AlreadyTried(h.model, initial)) continue;
-    // A placement scored as hidden behind a contour is judged so only (the occlusion pass): a
-    // block in full view has its own hypotheses.
-    hidden_only_ = h.behind_contour;
-    FitOnSupport(h.model, kSupportKind, initial);
-    hidden_only_ = false;
+    FitOnSupport(h.model, kSupportKind, initial, h.behind_contour ? Judged::kOnlyHidden : Judged::kWhole);
   }
 }
 
@@ -1342,7 +1338,8 @@ void RecognitionPass::FitIndexHypotheses(const RecognizerIndex& index, const std
       const ImageLine& l = lines_[static_cast<size_t>(group.segments[static_cast<size_t>(s)])];
       matches.push_back({edge, l.a, l.b});
     }
-    VerifyFitted(entry.model, FitIndexHypothesis(model, K_, initial, matches, lines_, options_), traced);
+    VerifyFitted(entry.model, FitIndexHypothesis(model, K_, initial, matches, lines_, options_), traced,
+                 Judged::kWhole);
   }
 }
 
@@ -1358,7 +1355,7 @@ void RecognitionPass::FitAlternatives() {
       const geometry::Pose3 initial = camera_.camera_T_world() * h.world_T_object;
       if (AlreadyTried(h.model, initial)) continue;
       ++fitted;
-      FitOnSupport(h.model, kAlternativeKind, initial);
+      FitOnSupport(h.model, kAlternativeKind, initial, Judged::kWhole);
     }
   }
 }

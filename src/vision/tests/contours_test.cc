@@ -118,5 +118,65 @@ TEST(ContoursTest, AHiddenEndLeavesTheModelOpenWhenAnotherWouldEndHiddenToo) {
   EXPECT_FALSE(AmbiguousExtent({{bar, cube, tall}}, 0, pose, RightOf(400), K));
 }
 
+// A cube laid on the near end of a bar whose middle a dark pole hides passes as hidden only if
+// nothing shows past the pole: there, the bar's edges go on where the cube's would end.
+TEST(ContoursTest, APoseThatGoesOnPastItsHiddenEndIsTold) {
+  const Camera camera = synthetic::SyntheticCamera();
+  const Eigen::Vector3d bar(0.09, 0.045, 0.045), cube(0.045, 0.045, 0.045);
+  const geometry::Pose3 bar_pose(Eigen::Quaterniond(Eigen::AngleAxisd(0.86, Eigen::Vector3d::UnitZ())),
+                                 {0, 0, 0.0225});
+  // The cube in the bar's half at -x: its inner face at the bar's centre.
+  const geometry::Pose3 cube_pose(bar_pose.rotation, bar_pose * Eigen::Vector3d(-0.0225, 0, 0));
+  const geometry::Pose3 camera_T_cube = camera.camera_T_world() * cube_pose;
+  const Eigen::Matrix3d K = camera.K();
+  // The pole over the bar's centre, a third of the bar's image wide.
+  double lo = 1e9, hi = -1e9;
+  for (int v = 0; v < 8; ++v) {
+    const double x = camera.Project(bar_pose * BoxVertex(bar, v))->x();
+    lo = std::min(lo, x), hi = std::max(hi, x);
+  }
+  const double centre = camera.Project(bar_pose.translation)->x(), half = (hi - lo) / 6;
+  auto with_pole = [&](cv::Mat image) {
+    cv::rectangle(image, cv::Point(static_cast<int>(centre - half), 0),
+                  cv::Point(static_cast<int>(centre + half), image.rows - 1), cv::Scalar(20), cv::FILLED);
+    return image;
+  };
+  const RecognizerOptions options;
+  const Model cube_model{"cube45", cube};
+  for (const bool bar_there : {true, false}) {
+    const cv::Mat image = with_pole(bar_there ? synthetic::RenderBoxes(camera, {{bar, bar_pose}}, 7)
+                                              : synthetic::RenderBoxes(camera, {{cube, cube_pose}}, 7));
+    const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+    const std::vector<ImageLine> contours = OccludingContours(detection, camera, options);
+    std::array<Eigen::Vector2d, 8> px;
+    for (int v = 0; v < 8; ++v)
+      px[static_cast<size_t>(v)] = (K * (camera_T_cube * BoxVertex(cube, v))).hnormalized();
+    std::vector<ContourOccluder> ways;
+    ContourOcclusions(contours, BoxImage(px, VisibleBoxEdges(cube, camera_T_cube.Inverse().translation)),
+                      &ways);
+    // The ways that hide the cube's inner face (vertices at +x) and none of its outer one.
+    int tried = 0;
+    for (const ContourOccluder& way : ways) {
+      bool inner_hidden = true, outer_shown = true;
+      for (int v = 0; v < 8; ++v) {
+        const bool hidden = way.Hides(px[static_cast<size_t>(v)]);
+        if (v & 1)
+          inner_hidden = inner_hidden && hidden;
+        else
+          outer_shown = outer_shown && !hidden;
+      }
+      if (!inner_hidden || !outer_shown) continue;
+      ++tried;
+      EXPECT_EQ(ContinuesPastHiddenEnd(cube_model, camera, camera_T_cube, way, detection.edge_map, options),
+                bar_there)
+          << "bar " << bar_there << ", way " << tried;
+    }
+    // The pole's near side runs across the cube's image (its far side lies beyond), and one side of
+    // it hides the inner face.
+    EXPECT_EQ(tried, 1) << "bar " << bar_there << ": " << contours.size() << " contours, " << ways.size()
+                        << " ways";
+  }
+}
+
 }  // namespace
 }  // namespace teachsim::vision

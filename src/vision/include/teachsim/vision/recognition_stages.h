@@ -341,6 +341,15 @@ struct ContourOccluder {
 // inside it.
 void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
                        std::vector<ContourOccluder>* occlusions);
+// Whether a pose hidden in part by a contour occluder goes on past it: an edge that runs from the
+// outline in view into the hidden part, continued past its hidden end over its own length, finds
+// image edges with a grey-level step across them (RecognizerOptions::min_step_grey) along 20 px or
+// more in a row. A block whose middle is hidden shows its far end beyond the occluder; a smaller
+// model fitted to the near end (a cube at a bar's end) would otherwise pass as hidden there too.
+// The occluder's pixels are pin-hole ones (camera.K()). Defined in recognizer.cc.
+bool ContinuesPastHiddenEnd(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                            const ContourOccluder& occluder, const EdgeMap& edge_map,
+                            const RecognizerOptions& options);
 // Whether the part of a pose in view leaves its model open: an end face of the box wholly hidden
 // by the occluder (its extent along that axis unseen) while another model of the library with the
 // same two other sides (within 2 mm), laid from the end in view, would end hidden as well (a bar
