@@ -36,8 +36,6 @@ std::array<int, 2> EdgeFaces(int e) {
   return faces;
 }
 
-double Cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
-
 }  // namespace
 
 uint16_t VisibleBoxEdges(const Eigen::Vector3d& size_m, const Eigen::Vector3d& camera_in_object) {

@@ -20,8 +20,6 @@ namespace teachsim::vision {
 
 namespace {
 
-double Cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) { return a.x() * b.y() - a.y() * b.x(); }
-
 Eigen::Vector2d End(const ImageLine& l, int end) { return end == 0 ? l.a : l.b; }
 
 // Sample points along the visible predicted edges of a box (projected with the lens, straight

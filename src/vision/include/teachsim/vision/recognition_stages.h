@@ -54,6 +54,11 @@ inline constexpr int kEdgeNearPx = 2;
 inline bool NearEdge(const EdgeMap& edge_map, int x, int y) {
   return (edge_map.near.ptr<uint8_t>(y)[x >> 3] >> (x & 7) & 1) != 0;
 }
+// The z component of the cross product of two image vectors.
+inline double Cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+  return a.x() * b.y() - a.y() * b.x();
+}
+
 // The nearest Canny edge pixel across a predicted edge through `pixel` (distorted image; 0, +1,
 // -1, +2, -2, ... px along the unit `normal`, up to max_offset_px) whose gradient runs across the
 // edge (within 25 deg): what edge support (2 px) and the editor's fit on edge points (3 px) look for.
