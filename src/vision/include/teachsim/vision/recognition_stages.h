@@ -433,7 +433,9 @@ class PlaceSet {
 // Every pose that a corner gives on each plane for each model and resting face, filtered by the
 // arms' perpendicularity on the plane and their lengths against the model's edges, scored by edge
 // support (detection.edge_map), and thinned to the best per model and place: at most
-// options.max_support_hypotheses, best first, each with score >= options.support_min_score.
+// options.max_support_hypotheses, best first, each with score >= options.support_min_score. Where
+// fewer pass, those short of it with one of the `contours` near their corner are scored again on
+// the side in view (behind_contour) and fill the rest, best first.
 std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, const Camera& camera,
                                                  const LineDetection& detection,
                                                  const std::vector<ImageCorner>& corners,
