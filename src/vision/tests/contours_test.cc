@@ -2,6 +2,7 @@
 // image, and what one or two of them hide.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <opencv2/imgproc.hpp>
 
 #include "synthetic_scene.h"
@@ -176,6 +177,71 @@ TEST(ContoursTest, APoseThatGoesOnPastItsHiddenEndIsTold) {
     EXPECT_EQ(tried, 1) << "bar " << bar_there << ": " << contours.size() << " contours, " << ways.size()
                         << " ways";
   }
+}
+
+// A bar on the table whose middle a dark pole hides (a third of the bar's image wide): placements
+// short of the support threshold with the pole near their corner are scored again on the outline in
+// view; they come after all those in full view, best first, and only where these leave room under
+// max_support_hypotheses.
+TEST(ContoursTest, PlacementsBehindAContourFillOnlyTheRoomThoseInViewLeave) {
+  const Camera camera = synthetic::SyntheticCamera();
+  const Model bar{"bar90", {0.09, 0.045, 0.045}}, cube{"cube45", {0.045, 0.045, 0.045}};
+  const ModelLibrary library{{cube, bar}};
+  const geometry::Pose3 bar_pose(Eigen::Quaterniond(Eigen::AngleAxisd(0.86, Eigen::Vector3d::UnitZ())),
+                                 {0, 0, 0.0225});
+  double lo = 1e9, hi = -1e9;
+  for (int v = 0; v < 8; ++v) {
+    const double x = camera.Project(bar_pose * BoxVertex(bar.box_size_m, v))->x();
+    lo = std::min(lo, x), hi = std::max(hi, x);
+  }
+  const double centre = camera.Project(bar_pose.translation)->x(), half = (hi - lo) / 6;
+  cv::Mat image = synthetic::RenderBoxes(camera, {{bar.box_size_m, bar_pose}}, 7);
+  cv::rectangle(image, cv::Point(static_cast<int>(centre - half), 0),
+                cv::Point(static_cast<int>(centre + half), image.rows - 1), cv::Scalar(20), cv::FILLED);
+  RecognizerOptions options;
+  const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+  const std::vector<ImageLine> contours = OccludingContours(detection, camera, options);
+  const std::vector<ImageCorner> corners = FindCorners(detection.lines, options);
+  auto hypotheses = [&](int max, const std::vector<ImageLine>& occluding) {
+    options.max_support_hypotheses = max;
+    return SupportHypotheses(library, camera, detection, corners, {SupportPlane{}}, options, occluding);
+  };
+  auto count_behind = [](const std::vector<SupportHypothesis>& hs) {
+    return std::count_if(hs.begin(), hs.end(), [](const SupportHypothesis& h) { return h.behind_contour; });
+  };
+
+  // Room for all: those in full view first (the bar where it stands the best of them), then those
+  // behind the pole, each part best first.
+  const std::vector<SupportHypothesis> all = hypotheses(100, contours);
+  const auto behind = count_behind(all);
+  const auto in_view = static_cast<std::ptrdiff_t>(all.size()) - behind;
+  ASSERT_GE(behind, 1) << contours.size() << " contours";
+  ASSERT_GE(in_view, 1);
+  EXPECT_EQ(all.front().model, 1);
+  EXPECT_LT((all.front().world_T_object.translation - bar_pose.translation).norm(), 0.002);
+  for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(all.size()); ++i) {
+    const SupportHypothesis& h = all[static_cast<size_t>(i)];
+    EXPECT_EQ(h.behind_contour, i >= in_view) << "hypothesis " << i;
+    EXPECT_GE(h.score, 0);
+    if (i > 0 && i != in_view) {
+      EXPECT_LE(h.score, all[static_cast<size_t>(i - 1)].score) << "hypothesis " << i;
+    }
+  }
+
+  // No room left by those in full view: none behind; room for one more: the best behind.
+  const std::vector<SupportHypothesis> no_room = hypotheses(static_cast<int>(in_view), contours);
+  EXPECT_EQ(no_room.size(), static_cast<size_t>(in_view));
+  EXPECT_EQ(count_behind(no_room), 0);
+  const std::vector<SupportHypothesis> one_more = hypotheses(static_cast<int>(in_view) + 1, contours);
+  ASSERT_EQ(one_more.size(), static_cast<size_t>(in_view) + 1);
+  EXPECT_TRUE(one_more.back().behind_contour);
+  EXPECT_EQ(one_more.back().score, all[static_cast<size_t>(in_view)].score);
+
+  // Without the contours, the same ones in full view and none behind.
+  const std::vector<SupportHypothesis> unaided = hypotheses(100, {});
+  ASSERT_EQ(unaided.size(), static_cast<size_t>(in_view));
+  EXPECT_EQ(count_behind(unaided), 0);
+  for (size_t i = 0; i < unaided.size(); ++i) EXPECT_EQ(unaided[i].score, all[i].score) << "hypothesis " << i;
 }
 
 }  // namespace
