@@ -1,5 +1,7 @@
 // teachsim: program a robot for contact tasks by demonstrating them on a virtual copy of the
 // work site (DESIGN.md).
+#include <malloc.h>
+
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -24,6 +26,13 @@ std::string DataPath(const std::string& relative) {
 
 int main(int argc, char** argv) {
   using namespace teachsim::app;
+  // glibc serves blocks of 128 kB and more with fresh mmap()s and gives the heap's free top back
+  // to the system: a process whose first images are recognized before anything larger has been
+  // freed page-faults every image's buffers anew (the dev set measured first in `bench recognize
+  // --no-peer`: line detection 35 ms per image against 9 ms once warm; docs/benchmarks.md, session
+  // 37). Blocks below 32 MB come from the heap, which keeps up to 128 MB free.
+  mallopt(M_MMAP_THRESHOLD, 32 << 20);
+  mallopt(M_TRIM_THRESHOLD, 128 << 20);
   CLI::App app{"teachsim " TEACHSIM_VERSION
                ": program contact tasks by demonstration on a reality-based virtual environment",
                "teachsim"};
