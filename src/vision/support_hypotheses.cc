@@ -182,6 +182,9 @@ bool SamePlace(const Model& model, const SupportHypothesis& a, const SupportHypo
 // JoinCollinearLines: the pieces of one edge are this close to one line and this far apart at most.
 constexpr double kCollinearPx = 1.5, kCollinearDeg = 3, kJoinGapPx = 40;
 
+// Best first, for stable sorts (equal scores keep the order they were tried in).
+bool HigherScore(const SupportHypothesis& a, const SupportHypothesis& b) { return a.score > b.score; }
+
 }  // namespace
 
 JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines) {
@@ -372,8 +375,7 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
   double largest_diagonal_m = 0, highest_m = -std::numeric_limits<double>::infinity();
   for (const Model& m : models.models) largest_diagonal_m = std::max(largest_diagonal_m, m.box_size_m.norm());
   for (const SupportPlane& plane : planes) highest_m = std::max(highest_m, plane.z_m + largest_diagonal_m);
-  std::vector<ImageLine> near_contours;
-  std::vector<std::vector<ImageLine>> near_by_corner(corners.size());
+  std::vector<std::vector<ImageLine>> near_by_corner(corners.size());  // the contours near each corner
   // Placements short of the support threshold with a contour near their corner: scored behind it
   // (OccludedPlacementSupport) only where the placements in full view leave room, and ranked after
   // them. Against scoring them as they came, mixed in by score (session 36), one block more is
@@ -409,7 +411,7 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     h.behind_contour = false;
     if (h.score >= 0) {
       all.push_back(h);
-    } else if (!near_contours.empty()) {
+    } else if (!near_by_corner[static_cast<size_t>(corner_index)].empty()) {
       short_near_contour.push_back(h);
     }
   };
@@ -418,7 +420,6 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     const ImageCorner& corner = corners[c];
     int vertical[2];
     for (int k = 0; k < 2; ++k) vertical[k] = VerticalArm(K, camera_T_world, corner.point, corner.arm_end[static_cast<size_t>(k)], vertical_tol);
-    near_contours.clear();
     if (!contours.empty()) {
       const std::optional<Eigen::Vector3d> nearest = on_plane(corner.point, highest_m);
       const double reach_px = nearest ? K(0, 0) * largest_diagonal_m / (camera_T_world * *nearest).z()
@@ -426,9 +427,8 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
       for (const ImageLine& line : contours) {
         const Eigen::Vector2d d = line.b - line.a;
         const double t = std::clamp(d.dot(corner.point - line.a) / d.squaredNorm(), 0.0, 1.0);
-        if ((line.a + t * d - corner.point).norm() <= reach_px) near_contours.push_back(line);
+        if ((line.a + t * d - corner.point).norm() <= reach_px) near_by_corner[c].push_back(line);
       }
-      near_by_corner[c] = near_contours;
     }
     for (size_t p = 0; p < planes.size(); ++p) {
       const SupportPlane& plane = planes[p];
@@ -494,7 +494,7 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
 
   // The best few per model and place.
   std::stable_sort(all.begin(), all.end(),
-                   [](const SupportHypothesis& a, const SupportHypothesis& b) { return a.score > b.score; });
+                   HigherScore);
   std::vector<SupportHypothesis> kept;
   auto keep = [&](const std::vector<SupportHypothesis>& ranked) {
     for (const SupportHypothesis& h : ranked) {
@@ -519,7 +519,7 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     }
     std::stable_sort(
         behind.begin(), behind.end(),
-        [](const SupportHypothesis& a, const SupportHypothesis& b) { return a.score > b.score; });
+        HigherScore);
     keep(behind);
   }
   return kept;
@@ -587,7 +587,7 @@ std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models,
     }
     // The best few distinct placements of this model (equal scores: the first tried).
     std::stable_sort(placements.begin(), placements.end(),
-                     [](const SupportHypothesis& a, const SupportHypothesis& b) { return a.score > b.score; });
+                     HigherScore);
     const double near_m = 0.25 * s.minCoeff();
     const size_t first = out.size();
     for (const SupportHypothesis& placement : placements) {
@@ -600,7 +600,7 @@ std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models,
     }
   }
   std::stable_sort(out.begin(), out.end(),
-                   [](const SupportHypothesis& a, const SupportHypothesis& b) { return a.score > b.score; });
+                   HigherScore);
   return out;
 }
 
