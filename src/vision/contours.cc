@@ -46,10 +46,16 @@ std::vector<ImageLine> OccludingContours(const LineDetection& detection, const C
         const auto px = camera.ProjectFromCamera(K_inv * Eigen::Vector3d(u.x(), u.y(), 1));
         grey[side] = px ? SmoothedGrey(detection.edge_map.smoothed, *px) : 0;
       }
-      steps[static_cast<size_t>(k)] = std::abs(grey[0] - grey[1]);
+      steps[static_cast<size_t>(k)] = grey[0] - grey[1];
     }
+    std::array<float, kProbes> signed_steps = steps;
+    for (float& step : steps) step = std::abs(step);
     std::nth_element(steps.begin(), steps.begin() + kProbes / 2, steps.end());
-    if (steps[kProbes / 2] >= options.contour_min_step_grey) out.push_back(line);
+    if (steps[kProbes / 2] < options.contour_min_step_grey) continue;
+    // Oriented with the darker side towards (-d.y, d.x), d = b - a: turned round where the median
+    // signed step says otherwise.
+    std::nth_element(signed_steps.begin(), signed_steps.begin() + kProbes / 2, signed_steps.end());
+    out.push_back(signed_steps[kProbes / 2] <= 0 ? line : ImageLine{line.b, line.a});
   }
   return out;
 }
@@ -75,10 +81,10 @@ BoxImage::BoxImage(const std::array<Eigen::Vector2d, 8>& vertices_px, uint16_t v
   } while (current != start && hull_size < 8);
 }
 
-bool CrossesBoxImage(const ImageLine& contour, const BoxImage& box) {
+ContourPassage PassageThroughBoxImage(const ImageLine& contour, const BoxImage& box) {
   constexpr double kBeyondPx = 4, kMinInsidePx = 10, kOwnEdgePx = 3;
   const double length = contour.Length();
-  if (!(length > 2 * kBeyondPx + kMinInsidePx) || box.hull_size < 3) return false;
+  if (!(length > kBeyondPx + kMinInsidePx) || box.hull_size < 3) return ContourPassage::kNone;
   const Eigen::Vector2d along = (contour.b - contour.a) / length, normal(-along.y(), along.x());
   // Quick refusal: the box's image lies wholly on one side of the line.
   bool left = false, right = false;
@@ -86,7 +92,7 @@ bool CrossesBoxImage(const ImageLine& contour, const BoxImage& box) {
     const double side = normal.dot(box.px[static_cast<size_t>(box.hull[i])] - contour.a);
     left = left || side > 0, right = right || side < 0;
   }
-  if (!left || !right) return false;
+  if (!left || !right) return ContourPassage::kNone;
   // Where the line enters and leaves the hull (Cyrus-Beck; inward is to the left of each edge).
   double t_in = -std::numeric_limits<double>::infinity(), t_out = -t_in;
   for (int i = 0; i < box.hull_size; ++i) {
@@ -95,23 +101,31 @@ bool CrossesBoxImage(const ImageLine& contour, const BoxImage& box) {
     const Eigen::Vector2d inward(-e.y(), e.x());
     const double num = inward.dot(contour.a - p), den = inward.dot(along);
     if (std::abs(den) < 1e-12) {
-      if (num < 0) return false;
+      if (num < 0) return ContourPassage::kNone;
     } else if (den > 0) {
       t_in = std::max(t_in, -num / den);
     } else {
       t_out = std::min(t_out, -num / den);
     }
   }
-  if (!(t_out - t_in >= kMinInsidePx) || t_in < kBeyondPx || t_out > length - kBeyondPx) return false;
+  // The part of the contour inside the hull, and whether each end lies beyond it.
+  const double inside = std::min(t_out, length) - std::max(t_in, 0.0);
+  const bool a_beyond = t_in >= kBeyondPx, b_beyond = t_out <= length - kBeyondPx;
+  if (!(inside >= kMinInsidePx) || (!a_beyond && !b_beyond)) return ContourPassage::kNone;
   // None of the box's own visible edges.
   for (int e = 0; e < 12; ++e) {
     if (!(box.visible_edges >> e & 1)) continue;
     if (std::abs(normal.dot(box.px[kBoxEdges[e][0]] - contour.a)) < kOwnEdgePx &&
         std::abs(normal.dot(box.px[kBoxEdges[e][1]] - contour.a)) < kOwnEdgePx) {
-      return false;
+      return ContourPassage::kNone;
     }
   }
-  return true;
+  if (a_beyond && b_beyond) return ContourPassage::kAcross;
+  return a_beyond ? ContourPassage::kIntoAtB : ContourPassage::kIntoAtA;
+}
+
+bool CrossesBoxImage(const ImageLine& contour, const BoxImage& box) {
+  return PassageThroughBoxImage(contour, box) == ContourPassage::kAcross;
 }
 
 namespace {
@@ -126,43 +140,123 @@ ContourOccluder::Side SideOf(const ImageLine& contour, const Eigen::Vector2d& to
   return side;
 }
 
+// The strip between two contours that do not meet where they are.
+ContourOccluder Strip(const ImageLine& p, const ImageLine& q) {
+  ContourOccluder o;
+  o.sides[0] = SideOf(p, 0.5 * (q.a + q.b) - p.a);
+  o.sides[1] = SideOf(q, 0.5 * (p.a + p.b) - q.a);
+  o.count = 2;
+  return o;
+}
+
+// Whether two flanks end alike in the direction `inward` (unit): their far ends that way no farther
+// apart along it than the flanks are apart (the two sides of a pole end where its top begins).
+bool EndsAlike(const ImageLine& p, const ImageLine& q, const Eigen::Vector2d& inward) {
+  const double p_end = std::max(inward.dot(p.a), inward.dot(p.b));
+  const double q_end = std::max(inward.dot(q.a), inward.dot(q.b));
+  const Eigen::Vector2d across(-inward.y(), inward.x());
+  const double apart = std::abs(across.dot(0.5 * (q.a + q.b) - 0.5 * (p.a + p.b)));
+  return std::abs(p_end - q_end) <= apart;
+}
+
+// Whether the strip between two flanks is on the same side of the step at both (darker than
+// beyond both, or lighter than beyond both: one thing in front), by OccludingContours' orientation.
+bool SameBetween(const ImageLine& p, const ImageLine& q) {
+  auto dark_toward = [](const ImageLine& l, const Eigen::Vector2d& point) {
+    const Eigen::Vector2d d = l.b - l.a;
+    return Eigen::Vector2d(-d.y(), d.x()).dot(point - l.a) > 0;
+  };
+  return dark_toward(p, 0.5 * (q.a + q.b)) == dark_toward(q, 0.5 * (p.a + p.b));
+}
+
 }  // namespace
 
 void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
-                       std::vector<ContourOccluder>* occlusions) {
+                       std::vector<ContourOccluder>* occlusions, bool ends_inside) {
   std::vector<ContourOccluder>& out = *occlusions;
   out.clear();
-  thread_local std::vector<const ImageLine*> crossing;
-  crossing.clear();
+  struct Passing {
+    const ImageLine* line;
+    ContourPassage passage;
+  };
+  thread_local std::vector<Passing> passing;
+  passing.clear();
   for (const ImageLine& c : contours) {
-    if (CrossesBoxImage(c, box)) crossing.push_back(&c);
+    const ContourPassage passage = PassageThroughBoxImage(c, box);
+    if (passage == ContourPassage::kAcross || (ends_inside && passage != ContourPassage::kNone))
+      passing.push_back({&c, passage});
   }
-  for (const ImageLine* c : crossing) {
-    const Eigen::Vector2d d = c->b - c->a, normal(-d.y(), d.x());
+  for (const Passing& p : passing) {
+    if (p.passage != ContourPassage::kAcross) continue;
+    const Eigen::Vector2d d = p.line->b - p.line->a, normal(-d.y(), d.x());
     for (double sign : {1.0, -1.0}) {
       ContourOccluder o;
-      o.sides[0] = SideOf(*c, sign * normal);
+      o.sides[0] = SideOf(*p.line, sign * normal);
       o.count = 1;
       out.push_back(o);
     }
   }
+  // The end of a contour that lies inside the box's image, as the direction in which it runs there
+  // (from the end beyond); zero for one across it.
+  auto inward = [](const Passing& p) -> Eigen::Vector2d {
+    const Eigen::Vector2d d = (p.line->b - p.line->a).normalized();
+    switch (p.passage) {
+      case ContourPassage::kIntoAtB:
+        return d;
+      case ContourPassage::kIntoAtA:
+        return -d;
+      default:
+        return Eigen::Vector2d::Zero();
+    }
+  };
   const double min_cos = std::cos(30 * M_PI / 180);
-  for (size_t i = 0; i < crossing.size(); ++i) {
-    for (size_t j = i + 1; j < crossing.size(); ++j) {
-      const ImageLine& p = *crossing[i];
-      const ImageLine& q = *crossing[j];
+  for (size_t i = 0; i < passing.size(); ++i) {
+    for (size_t j = i + 1; j < passing.size(); ++j) {
+      const ImageLine& p = *passing[i].line;
+      const ImageLine& q = *passing[j].line;
       const Eigen::Vector2d dp = (p.b - p.a).normalized(), dq = (q.b - q.a).normalized();
       if (std::abs(dp.dot(dq)) < min_cos) continue;
+      // Two that end inside: both from the same side (the two flanks of a thing whose end is in
+      // front of the box). One that ends inside may pair with one across.
+      const Eigen::Vector2d ip = inward(passing[i]), iq = inward(passing[j]);
+      if (ip.dot(iq) < 0) continue;
+      if ((ip != Eigen::Vector2d::Zero() || iq != Eigen::Vector2d::Zero()) &&
+          (!EndsAlike(p, q, ip != Eigen::Vector2d::Zero() ? ip : iq) || !SameBetween(p, q))) {
+        continue;
+      }
       // Each wholly on one side of the other (they do not meet where they are).
       const Eigen::Vector2d np(-dp.y(), dp.x()), nq(-dq.y(), dq.x());
       const double qa = np.dot(q.a - p.a), qb = np.dot(q.b - p.a);
       const double pa = nq.dot(p.a - q.a), pb = nq.dot(p.b - q.a);
       if (qa * qb <= 0 || pa * pb <= 0) continue;
-      ContourOccluder o;
-      o.sides[0] = SideOf(p, 0.5 * (q.a + q.b) - p.a);
-      o.sides[1] = SideOf(q, 0.5 * (p.a + p.b) - q.a);
-      o.count = 2;
-      out.push_back(o);
+      out.push_back(Strip(p, q));
+    }
+  }
+  // One that ends inside with a flank beside the box's image (the pole's other side passes the box
+  // by): the strip between them, when they are no farther apart than the box's image is wide.
+  for (const Passing& into : passing) {
+    if (into.passage == ContourPassage::kAcross) continue;
+    const ImageLine& p = *into.line;
+    const Eigen::Vector2d dp = (p.b - p.a).normalized(), np(-dp.y(), dp.x());
+    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+    for (int k = 0; k < box.hull_size; ++k) {
+      const double d = np.dot(box.px[static_cast<size_t>(box.hull[k])] - p.a);
+      lo = std::min(lo, d), hi = std::max(hi, d);
+    }
+    const double width = hi - lo;
+    for (const ImageLine& q : contours) {
+      bool passes = false;
+      for (const Passing& other : passing) passes = passes || other.line == &q;
+      if (passes) continue;
+      const Eigen::Vector2d dq = (q.b - q.a).normalized(), nq(-dq.y(), dq.x());
+      if (std::abs(dp.dot(dq)) < min_cos) continue;
+      const double qa = np.dot(q.a - p.a), qb = np.dot(q.b - p.a);
+      const double pa = nq.dot(p.a - q.a), pb = nq.dot(p.b - q.a);
+      if (qa * qb <= 0 || pa * pb <= 0 || std::max(std::abs(qa), std::abs(qb)) > width ||
+          !EndsAlike(p, q, inward(into)) || !SameBetween(p, q)) {
+        continue;
+      }
+      out.push_back(Strip(p, q));
     }
   }
 }

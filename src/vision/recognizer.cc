@@ -451,18 +451,32 @@ struct Hiding {
 struct HiddenOutline {
   double share = 0, coverage = 0;
 };
-HiddenOutline HiddenOutlineShare(const Model& model, const Camera& camera,
-                                 const geometry::Pose3& camera_T_object, const Hiding& hiding,
-                                 const EdgeMap& edge_map) {
-  int hidden = 0, total = 0, supported = 0;
-  ForEachOutlineSample(
-      model.box_size_m, camera_T_object, camera,
-      [&](const Eigen::Vector3d& point, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int) {
-        ++total;
-        if (!hiding(point)) return;
-        ++hidden;
-        supported += EdgeAcross(edge_map, c, normal) ? 1 : 0;
-      });
+// A pose's outline samples (ForEachOutlineSample), kept to be judged against several ways of hiding
+// it, each sample's edge support found on first use.
+struct OutlineSamples {
+  struct Sample {
+    Eigen::Vector3d point;  // in the camera frame
+    Eigen::Vector2d pixel, normal;
+    int8_t edge = -1;  // EdgeAcross: -1 not yet asked, else 0 or 1
+  };
+  std::vector<Sample> samples;
+  OutlineSamples(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object) {
+    ForEachOutlineSample(
+        model.box_size_m, camera_T_object, camera,
+        [&](const Eigen::Vector3d& point, const Eigen::Vector2d& c, const Eigen::Vector2d& normal, int) {
+          samples.push_back({point, c, normal});
+        });
+  }
+};
+HiddenOutline HiddenOutlineShare(OutlineSamples* outline, const Hiding& hiding, const EdgeMap& edge_map) {
+  int hidden = 0, supported = 0;
+  const int total = static_cast<int>(outline->samples.size());
+  for (OutlineSamples::Sample& s : outline->samples) {
+    if (!hiding(s.point)) continue;
+    ++hidden;
+    if (s.edge < 0) s.edge = EdgeAcross(edge_map, s.pixel, s.normal) ? 1 : 0;
+    supported += s.edge;
+  }
   HiddenOutline out;
   if (total > 0) out.share = static_cast<double>(hidden) / total;
   if (hidden > 0) out.coverage = static_cast<double>(supported) / hidden;
@@ -1518,12 +1532,17 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
   // A pose judged again with `hiding` leaving out part of its outline (`hidden` of its samples in
   // the image): the matched share over the outline in view, without the lines accepted recognitions
   // claim; the rules, and the occlusion pass's evidence score.
-  auto judge_hidden = [&](const Rejected& r, const Hiding& hiding,
-                          double hidden) -> std::optional<Candidate> {
+  // `free_matches`: the pose's matches among the free lines, found on the first call for the pose
+  // (they do not depend on what hides it).
+  auto judge_hidden = [&](const Rejected& r, const Hiding& hiding, double hidden,
+                          std::optional<EdgeMatchSet>* free_matches) -> std::optional<Candidate> {
     const Model& model = models_.models[static_cast<size_t>(r.model)];
     const geometry::Pose3& pose = r.fit.camera_T_object;
-    EdgeMatchSet set = MatchEdges(model, K_, pose, free_lines, options_.match_distance_px, match_angle_);
-    for (int& seg : set.segments) seg = free_index[static_cast<size_t>(seg)];
+    if (!*free_matches) {
+      *free_matches = MatchEdges(model, K_, pose, free_lines, options_.match_distance_px, match_angle_);
+      for (int& seg : (*free_matches)->segments) seg = free_index[static_cast<size_t>(seg)];
+    }
+    EdgeMatchSet set = **free_matches;
     // The matched share of the outline in view (the hidden share as the samples inside the image give it).
     const double covered = set.matched_fraction * set.visible_length_px;
     set.visible_length_px *= 1 - hidden;
@@ -1559,6 +1578,7 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
       deep = Interpenetrate(r.model, pose, candidates_[accepted[k]]);
     }
     if (deep || Implausible(model, pose)) continue;
+    std::optional<EdgeMatchSet> free_matches;
     const ImageExtent extent = image_extent(model, pose);
     in_front.clear();
     for (size_t k = 0; k < occluders.size(); ++k) {
@@ -1570,12 +1590,17 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
       }
     }
     std::optional<Candidate> best;
+    std::optional<OutlineSamples> outline;  // sampled on first use
+    auto hidden_outline = [&](const Hiding& hiding) {
+      if (!outline) outline.emplace(model, camera_, pose);
+      return HiddenOutlineShare(&*outline, hiding, detection_.edge_map);
+    };
     if (!in_front.empty()) {
       Hiding hiding;
       hiding.boxes = &in_front;
-      const double hidden = HiddenOutlineShare(model, camera_, pose, hiding, detection_.edge_map).share;
+      const double hidden = hidden_outline(hiding).share;
       if (hidden >= options_.occlusion_min_hidden_share && 1 - hidden >= options_.occlusion_min_shown_share) {
-        best = judge_hidden(r, hiding, hidden);
+        best = judge_hidden(r, hiding, hidden, &free_matches);
       }
     }
     if (!best && !contours.empty() && extent.valid) {
@@ -1584,18 +1609,18 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
         px[static_cast<size_t>(v)] = (K_ * (pose * BoxVertex(model.box_size_m, v))).hnormalized();
       const uint16_t visible = VisibleBoxEdges(model.box_size_m, pose.Inverse().translation);
       std::vector<ContourOccluder> occlusions;
-      ContourOcclusions(contours, BoxImage(px, visible), &occlusions);
+      ContourOcclusions(contours, BoxImage(px, visible), &occlusions, options_.contour_pole_ends);
       for (const ContourOccluder& contour : occlusions) {
         Hiding hiding;
         hiding.contour = &contour;
         hiding.K = K_;
-        const HiddenOutline hidden = HiddenOutlineShare(model, camera_, pose, hiding, detection_.edge_map);
+        const HiddenOutline hidden = hidden_outline(hiding);
         if (hidden.share < options_.occlusion_min_hidden_share ||
             1 - hidden.share < options_.contour_min_shown_share ||
             hidden.coverage > options_.contour_max_hidden_coverage) {
           continue;
         }
-        std::optional<Candidate> c = judge_hidden(r, hiding, hidden.share);
+        std::optional<Candidate> c = judge_hidden(r, hiding, hidden.share, &free_matches);
         if (c && (!best || c->rank_score > best->rank_score) &&
             !ContinuesPastHiddenEnd(model, camera_, pose, contour, detection_.edge_map, options_) &&
             !AmbiguousExtent(models_, r.model, pose, contour, K_)) {

@@ -38,6 +38,48 @@ TEST(ContoursTest, ALineCrossesABoxImageOnlyWhenItRunsAcrossAllOfIt) {
   EXPECT_FALSE(CrossesBoxImage({{150, 261.5}, {400, 261.5}}, box));
   // A short line never does.
   EXPECT_FALSE(CrossesBoxImage({{250, 225}, {250, 241}}, box));
+  // Into it: one end beyond, the other inside, told by which end is inside.
+  EXPECT_EQ(PassageThroughBoxImage({{250, 100}, {250, 230}}, box), ContourPassage::kIntoAtB);
+  EXPECT_EQ(PassageThroughBoxImage({{250, 230}, {250, 100}}, box), ContourPassage::kIntoAtA);
+  EXPECT_EQ(PassageThroughBoxImage({{250, 100}, {250, 400}}, box), ContourPassage::kAcross);
+  EXPECT_EQ(PassageThroughBoxImage({{250, 200}, {250, 245}}, box), ContourPassage::kNone);  // inside
+  EXPECT_EQ(PassageThroughBoxImage({{250, 100}, {250, 195}}, box), ContourPassage::kNone);  // 5 px in
+  EXPECT_EQ(PassageThroughBoxImage({{150, 260}, {250, 260}}, box), ContourPassage::kNone);  // own edge
+}
+
+// The flanks of a pole whose top is in front of the box: from below it up to y = 220 (inside the
+// box's image), each with its darker side towards the pole (OccludingContours' orientation).
+TEST(ContoursTest, TwoFlanksThatEndInsideHideTheStripUpToTheirEnds) {
+  const BoxImage box = Rectangle();  // x 200-310, y 190-260
+  const ImageLine left{{240, 400}, {240, 220}}, right{{270, 220}, {270, 400}};
+  std::vector<ContourOccluder> ways;
+  ContourOcclusions({left, right}, box, &ways);
+  ASSERT_EQ(ways.size(), 1u);  // the strip; neither flank alone hides a side (it ends inside)
+  EXPECT_EQ(ways[0].count, 2);
+  EXPECT_TRUE(ways[0].Hides({255, 240}));
+  EXPECT_FALSE(ways[0].Hides({255, 200}));  // beyond the pole's top
+  EXPECT_FALSE(ways[0].Hides({220, 240}));
+  EXPECT_FALSE(ways[0].Hides({290, 240}));
+  // Not with ends_inside false, nor when the strip is darker beyond one flank than inside.
+  ContourOcclusions({left, right}, box, &ways, /*ends_inside=*/false);
+  EXPECT_TRUE(ways.empty());
+  ContourOcclusions({left, {{270, 400}, {270, 220}}}, box, &ways);
+  EXPECT_TRUE(ways.empty());
+  // Nor when they end far apart: 80 px along them, 30 px apart.
+  ContourOcclusions({left, {{270, 300}, {270, 400}}}, box, &ways);
+  EXPECT_TRUE(ways.empty());
+
+  // One flank inside, the other beside the box (it passes the box by on the right).
+  const ImageLine beside{{330, 220}, {330, 400}};
+  ASSERT_EQ(PassageThroughBoxImage(beside, box), ContourPassage::kNone);
+  ContourOcclusions({left, beside}, box, &ways);
+  ASSERT_EQ(ways.size(), 1u);
+  EXPECT_TRUE(ways[0].Hides({300, 240}));
+  EXPECT_FALSE(ways[0].Hides({300, 200}));
+  EXPECT_FALSE(ways[0].Hides({230, 240}));
+  // Not when it is farther from the first than the box's image is wide (110 px).
+  ContourOcclusions({left, {{360, 220}, {360, 400}}}, box, &ways);
+  EXPECT_TRUE(ways.empty());
 }
 
 TEST(ContoursTest, OneContourHidesEitherSideAndTwoTheStripBetweenThem) {
@@ -86,6 +128,9 @@ TEST(ContoursTest, OnlyLongStepEdgesAreOccludingContours) {
     EXPECT_GT(c.Length(), 400);
     const double x = 0.5 * (c.a.x() + c.b.x());
     EXPECT_TRUE(std::abs(x - 299.5) < 2 || std::abs(x - 339.5) < 2) << x;
+    // Oriented with the dark pole towards (-d.y, d.x).
+    const Eigen::Vector2d d = (c.b - c.a).normalized();
+    EXPECT_GT(Eigen::Vector2d(-d.y(), d.x()).dot(Eigen::Vector2d(319.5, 240) - c.a), 0) << x;
   }
   options.contour_min_step_grey = 0;  // the thin line too (an edge either side of it)
   const size_t with_line = OccludingContours(detection, camera, options).size();

@@ -31,7 +31,8 @@
 // share is of that part only), no-rescue and rescue-X (poses short of the matched share turned down
 // unjudged; the evidence score that accepts them), no-occlusion (no second judgement of poses that
 // accepted recognitions partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits), no-contours
-// (no occluding contours: vision::RecognizerOptions::occlusion_contours), contourlen-PX, contourstep-GREY,
+// (no occluding contours: vision::RecognizerOptions::occlusion_contours), no-pole-ends (no strips
+// between flanks that end inside a pose's image: contour_pole_ends), contourlen-PX, contourstep-GREY,
 // contourcover-X and contourshown-X (their limits), refitrms-PX,
 // refitcoverage-X, refitscore-X, refitinimage-X (the edge-point refit's limits; no-refit switches it off),
 // balance-N (the non-maximum suppression's pairwise margin; 0: off), ownlead-N and rankshare-X (its second
@@ -501,6 +502,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "matched-whole-edges") return o->matched_share_in_image = false, std::nullopt;
   if (a == "no-occlusion") return o->occlusion_reverify = false, std::nullopt;
   if (a == "no-contours") return o->occlusion_contours = false, std::nullopt;
+  if (a == "no-pole-ends") return o->contour_pole_ends = false, std::nullopt;
   if (a == "no-rescue") return o->matched_share_rescue = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
   const std::size_t dash = a.rfind('-');
@@ -556,7 +558,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, no-refit, skip-any-claim, "
-           "matched-whole-edges, no-occlusion, no-contours, no-rescue, rescue-X, "
+           "matched-whole-edges, no-occlusion, no-contours, no-pole-ends, no-rescue, rescue-X, "
            "rules-only, index-N, "
            "support-N, "
            "contrast-X, "

@@ -304,7 +304,8 @@ JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines);
 // edges of at least options.contour_min_length_px, collinear pieces joined (JoinCollinearLines),
 // with a median grey-level step across them of at least options.contour_min_step_grey (a wood
 // grain line is no outline), each taken for the outline of something in front that the library
-// does not hold.
+// does not hold. Each runs from a to b with its darker side towards (-d.y, d.x), d = b - a (by the
+// median signed step).
 std::vector<ImageLine> OccludingContours(const LineDetection& detection, const Camera& camera,
                                          const RecognizerOptions& options);
 // A box's image: its vertices' pin-hole projections (undistorted px), their convex hull, and its
@@ -316,10 +317,13 @@ struct BoxImage {
   int hull[8] = {0, 0, 0, 0, 0, 0, 0, 0};  // indices into px, counter-clockwise (y up)
   int hull_size = 0;
 };
-// Whether a contour runs across a box's image: it must enter and leave the hull at least 4 px
-// inside its own ends, cross at least 10 px of it, and lie along none of the visible edges (both
-// ends of one within 3 px of its line).
-bool CrossesBoxImage(const ImageLine& contour, const BoxImage& box);
+// How a contour passes through a box's image: across it (it enters and leaves the hull at least
+// 4 px inside its own ends), or into it (one end 4 px or more beyond the hull, the other not: the
+// end of something in front lies over the box), at least 10 px of it inside the hull, and along none
+// of the visible edges (both ends of one within 3 px of its line); else kNone.
+enum class ContourPassage : uint8_t { kNone, kAcross, kIntoAtA, kIntoAtB };  // kIntoAtB: b is inside
+ContourPassage PassageThroughBoxImage(const ImageLine& contour, const BoxImage& box);
+bool CrossesBoxImage(const ImageLine& contour, const BoxImage& box);  // passage kAcross
 // What contours hide: one side of a contour along its length, or the strip between two; samples
 // within kContourBandPx of a contour on the side in view count as hidden too (the contour's own edge
 // confounds their support).
@@ -341,11 +345,15 @@ struct ContourOccluder {
     return count > 0 && sides[0].Hides(px) && (count < 2 || sides[1].Hides(px));
   }
 };
-// The ways the contours that run across a box's image (CrossesBoxImage) can hide part of it: either
-// side of each, and the strip between each two of them within 30 deg of parallel that do not meet
-// inside it.
+// The ways the contours that pass through a box's image (PassageThroughBoxImage) can hide part of it:
+// either side of each that runs across it, and the strip between each two of them within 30 deg of
+// parallel that do not meet inside it, where two that end inside come from the same side (the flanks
+// of a pole whose top is in front of the box: the strip ends with the shorter one), or one that ends
+// inside with one beside the box no farther from it than the box's image is wide; such a pair's far
+// ends alike (no farther apart along them than they are apart) and the strip on the same side of the
+// grey-level step at both (OccludingContours' orientation). ends_inside false: only contours across.
 void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
-                       std::vector<ContourOccluder>* occlusions);
+                       std::vector<ContourOccluder>* occlusions, bool ends_inside = true);
 // Whether a pose hidden in part by a contour occluder goes on past it: an edge that runs from the
 // outline in view into the hidden part, continued past its hidden end over its own length, finds
 // image edges with a grey-level step across them (RecognizerOptions::min_step_grey) along 20 px or
