@@ -112,7 +112,7 @@ double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& cam
   const uint16_t visible = VisibleBoxEdges(size_m, camera_T_object.Inverse().translation);
   thread_local std::vector<ContourOccluder> occlusions;
   // Flanks that end inside the box's image are left out here (ends_inside false): they are for
-  // the occlusion pass; here they took the stage 1.4-2.5 ms longer per image for 2 more blocks in 720
+  // the occlusion pass; here they took the stage 1.4-3 ms longer per image for 2 more blocks in 720
   // images (docs/benchmarks.md, session 38).
   ContourOcclusions(contours, BoxImage(px, visible), &occlusions, /*ends_inside=*/false);
   if (occlusions.empty()) return -1;

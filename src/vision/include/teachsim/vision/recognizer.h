@@ -163,8 +163,8 @@ struct RecognizerOptions {
   // The occlusion pass also takes the strip between two flanks that end inside the pose's image, or
   // one that does with one beside it (a pole whose top is in front of the block; ContourOcclusions):
   // their ends alike, the same side of the grey-level step towards the strip at both. Render seeds
-  // 7-18 (720 images): found 0.4-0.7 visible 59 -> 62, < 0.4 3 -> 4, >= 0.7 2190 -> 2191, false
-  // detections the same (docs/benchmarks.md, session 38).
+  // 7-71 (3900 images): found 0.4-0.7 visible 345 -> 359, < 0.4 21 -> 22, >= 0.7 11598 -> 11602,
+  // false detections 179 -> 181 (docs/benchmarks.md, session 38).
   bool contour_pole_ends = true;
   double contour_min_length_px = 60;
   double contour_min_step_grey = 30;
