@@ -180,11 +180,13 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
     ContourPassage passage;
   };
   thread_local std::vector<Passing> passing;
+  thread_local std::vector<ContourPassage> passage_of;  // of each contour
   passing.clear();
-  for (const ImageLine& c : contours) {
-    const ContourPassage passage = PassageThroughBoxImage(c, box);
+  passage_of.resize(contours.size());
+  for (size_t k = 0; k < contours.size(); ++k) {
+    const ContourPassage passage = passage_of[k] = PassageThroughBoxImage(contours[k], box);
     if (passage == ContourPassage::kAcross || (ends_inside && passage != ContourPassage::kNone))
-      passing.push_back({&c, passage});
+      passing.push_back({&contours[k], passage});
   }
   for (const Passing& p : passing) {
     if (p.passage != ContourPassage::kAcross) continue;
@@ -244,10 +246,9 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
       lo = std::min(lo, d), hi = std::max(hi, d);
     }
     const double width = hi - lo;
-    for (const ImageLine& q : contours) {
-      bool passes = false;
-      for (const Passing& other : passing) passes = passes || other.line == &q;
-      if (passes) continue;
+    for (size_t k = 0; k < contours.size(); ++k) {
+      if (passage_of[k] != ContourPassage::kNone) continue;  // paired above
+      const ImageLine& q = contours[k];
       const Eigen::Vector2d dq = (q.b - q.a).normalized(), nq(-dq.y(), dq.x());
       if (std::abs(dp.dot(dq)) < min_cos) continue;
       const double qa = np.dot(q.a - p.a), qb = np.dot(q.b - p.a);
