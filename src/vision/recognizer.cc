@@ -84,6 +84,10 @@ Status RecognizerOptions::Validate() const {
     return Status::InvalidInput("RecognizerOptions::conflict_own_lead = " +
                                 std::to_string(conflict_own_lead) + " must be >= 0 (0: off)");
   }
+  if (!(min_own_balance >= 0)) {
+    return Status::InvalidInput("RecognizerOptions::min_own_balance = " + std::to_string(min_own_balance) +
+                                " must be >= 0 (0: off)");
+  }
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_rank_share", conflict_rank_share));
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_in_image_lead", conflict_in_image_lead));
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_tie_rank_share", conflict_tie_rank_share));
@@ -749,6 +753,34 @@ int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object
   return balance;
 }
 
+std::vector<size_t> ExplainedAway(const std::vector<std::pair<const Model*, geometry::Pose3>>& recognitions,
+                                  const Camera& camera, const EdgeMap& edge_map, const FixedEdgeMap& fixed,
+                                  const RecognizerOptions& options) {
+  std::vector<size_t> dropped;
+  if (options.min_own_balance <= 0) return dropped;
+  std::vector<size_t> kept(recognitions.size());
+  for (size_t k = 0; k < kept.size(); ++k) kept[k] = k;
+  std::vector<std::pair<const Model*, geometry::Pose3>> others;
+  while (!kept.empty()) {
+    int weakest = std::numeric_limits<int>::max();
+    size_t weakest_at = 0;
+    for (size_t k = 0; k < kept.size(); ++k) {
+      others.clear();
+      for (size_t j : kept) {
+        if (j != kept[k]) others.push_back(recognitions[j]);
+      }
+      const auto& [model, camera_T_object] = recognitions[kept[k]];
+      const int balance =
+          OwnOutlineBalance(*model, camera_T_object, others, camera, edge_map, fixed, options);
+      if (balance < weakest) weakest = balance, weakest_at = k;
+    }
+    if (weakest >= options.min_own_balance) break;
+    dropped.push_back(kept[weakest_at]);
+    kept.erase(kept.begin() + static_cast<std::ptrdiff_t>(weakest_at));
+  }
+  return dropped;
+}
+
 bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival,
                    const RecognizerOptions& options) {
   const int margin = options.conflict_balance_margin;
@@ -1130,6 +1162,9 @@ class RecognitionPass {
   // suppression too, so that a floating wrong candidate cannot suppress the right one and then be
   // culled itself. Returns the members of `set` (candidate indices) that are supported.
   std::vector<size_t> SupportedSubset(const std::vector<size_t>& set) const;
+  // Drops, weakest first, the accepted recognitions that the others explain away
+  // (RecognizerOptions::min_own_balance).
+  std::vector<size_t> WithoutExplainedAway(std::vector<size_t> accepted) const;
   // Two poses that interpenetrate this deeply are the same object or one of them is wrong.
   bool Interpenetrate(int model_c, const geometry::Pose3& camera_T_c, const Candidate& a) const;
   // A candidate conflicts with an accepted one when they interpenetrate, share a third of its
@@ -1474,7 +1509,24 @@ std::vector<size_t> RecognitionPass::Select() {
       if (ReplacesRival(own, rival, options_)) accepted[conflicts[0]] = i;
     }
   }
-  return SupportedSubset(accepted);
+  return WithoutExplainedAway(SupportedSubset(accepted));
+}
+
+std::vector<size_t> RecognitionPass::WithoutExplainedAway(std::vector<size_t> accepted) const {
+  if (options_.min_own_balance <= 0 || accepted.empty()) return accepted;
+  std::vector<std::pair<const Model*, geometry::Pose3>> recognitions;
+  for (size_t i : accepted) {
+    const Candidate& c = candidates_[i];
+    recognitions.push_back({&models_.models[static_cast<size_t>(c.model)], c.camera_T_object});
+  }
+  const std::vector<size_t> dropped =
+      ExplainedAway(recognitions, camera_, detection_.edge_map, fixed_edges_, options_);
+  if (dropped.empty()) return accepted;
+  std::vector<size_t> kept;
+  for (size_t k = 0; k < accepted.size(); ++k) {
+    if (std::find(dropped.begin(), dropped.end(), k) == dropped.end()) kept.push_back(accepted[k]);
+  }
+  return SupportedSubset(kept);  // what rested on a dropped one no longer stands
 }
 
 void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,

@@ -1127,6 +1127,47 @@ TEST(SelectionTest, WhatTheRightModelPredictsAloneIsInTheImage) {
   }
 }
 
+// Explained away (RecognizerOptions::min_own_balance): in the image of a bar, a cube recognized on
+// the bar's end beside the bar itself predicts nothing of its own that is in the image and is
+// dropped, the bar stays; in an image of a bar and a cube apart, both recognized, neither is dropped;
+// with the minimum 0 nothing is.
+TEST(SelectionTest, ARecognitionTheOthersExplainAwayIsDropped) {
+  const Camera camera = SyntheticCamera();
+  const RecognizerOptions options;
+  RecognizerOptions off = options;
+  off.min_own_balance = 0;
+  const FixedEdgeMap no_fixed = ProjectFixedEdges(nullptr, camera);
+  const Model bar_model = Bar(), cube_model = Cube();
+  const geometry::Pose3 camera_T_world = camera.camera_T_world();
+  for (const double yaw : {-0.3, 0.45, 1.2}) {
+    const geometry::Pose3 bar = OnTable(Bar().box_size_m, 0.03, -0.02, yaw);
+    geometry::Pose3 cube_on_end = bar;
+    cube_on_end.translation = bar * Eigen::Vector3d(0.0225, 0, 0);
+    const LineDetection bar_image =
+        DetectLinesAndEdges(RenderBoxes(camera, {{Bar().box_size_m, bar}}, 13), camera, options);
+    const std::vector<std::pair<const Model*, geometry::Pose3>> bar_and_end = {
+        {&bar_model, camera_T_world * bar}, {&cube_model, camera_T_world * cube_on_end}};
+    EXPECT_EQ(ExplainedAway(bar_and_end, camera, bar_image.edge_map, no_fixed, options),
+              std::vector<size_t>{1})
+        << "yaw " << yaw;
+    EXPECT_TRUE(ExplainedAway(bar_and_end, camera, bar_image.edge_map, no_fixed, off).empty())
+        << "yaw " << yaw;
+
+    const geometry::Pose3 cube_apart = OnTable(Cube().box_size_m, -0.07, 0.06, yaw + 0.3);
+    const LineDetection both_image = DetectLinesAndEdges(
+        RenderBoxes(camera, {{Bar().box_size_m, bar}, {Cube().box_size_m, cube_apart}}, 13), camera, options);
+    const std::vector<std::pair<const Model*, geometry::Pose3>> apart = {
+        {&bar_model, camera_T_world * bar}, {&cube_model, camera_T_world * cube_apart}};
+    EXPECT_TRUE(ExplainedAway(apart, camera, both_image.edge_map, no_fixed, options).empty())
+        << "yaw " << yaw;
+    // The true blocks' own balances clear the minimum by far (the cube's is its whole outline here).
+    EXPECT_GE(OwnOutlineBalance(cube_model, camera_T_world * cube_apart, {{&bar_model, camera_T_world * bar}},
+                                camera, both_image.edge_map, no_fixed, options),
+              2 * options.min_own_balance)
+        << "yaw " << yaw;
+  }
+}
+
 // The selection's pairwise decision on the numbers it is given: a candidate whose own outline is
 // not in the image does not replace by evidence; one whose rival's own outline is not either does;
 // where both own outlines show, the candidate needs the lead and the rank share; where neither shows,

@@ -553,6 +553,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"rankshare", [o](double v) { o->conflict_rank_share = v; }},
       {"inimagelead", [o](double v) { o->conflict_in_image_lead = v; }},
       {"tieshare", [o](double v) { o->conflict_tie_rank_share = v; }},
+      {"ownbalance", [o](double v) { o->min_own_balance = static_cast<int>(v); }},
       {"centreslack", [o](double v) { o->support_centre_slack_m = v / 1000; }},
   };
   const auto setter = setters.find(name);
@@ -567,7 +568,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "stepgrey-X, stepoffset-PX, alternatives-N, permodel-N, matchedinimage-X, refitrms-PX, "
            "refitcoverage-X, refitscore-X, contourlen-PX, contourcover-X, contourstep-GREY, contourshown-X, "
            "refitinimage-X, "
-           "balance-N, ownlead-N, rankshare-X, inimagelead-X, tieshare-X, centreslack-MM)";
+           "balance-N, ownlead-N, rankshare-X, inimagelead-X, tieshare-X, ownbalance-N, centreslack-MM)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);

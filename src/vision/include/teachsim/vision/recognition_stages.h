@@ -486,6 +486,13 @@ int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object
                       const std::vector<std::pair<const Model*, geometry::Pose3>>& others,
                       const Camera& camera, const EdgeMap& edge_map, const FixedEdgeMap& fixed,
                       const RecognizerOptions& options);
+// The recognitions that the others explain away (RecognizerOptions::min_own_balance): each one's
+// OwnOutlineBalance against all the others; the weakest is dropped while it is under the minimum, and
+// the rest are judged again without it. Positions into `recognitions` (model, camera_T_object), in
+// the order dropped; none when the minimum is 0.
+std::vector<size_t> ExplainedAway(const std::vector<std::pair<const Model*, geometry::Pose3>>& recognitions,
+                                  const Camera& camera, const EdgeMap& edge_map, const FixedEdgeMap& fixed,
+                                  const RecognizerOptions& options);
 // One side of the selection's pairwise test: its own-outline balance (OwnOutlineBalance), its rank
 // (net edge support times evidence score) and the share of its visible outline inside the image
 // (VisibleOutlineInImage).

@@ -241,6 +241,15 @@ struct RecognizerOptions {
   // session 17).
   double conflict_in_image_lead = 0.1;
   double conflict_tie_rank_share = 0.85;
+  // Explained away: after the selection, a recognition whose own outline (OwnOutlineBalance against
+  // all the other accepted recognitions, fixed edges left out too) shows in the image on balance by
+  // fewer than this many samples (2.5 px apart) is dropped, the weakest first: what it predicts the
+  // others explain, and the rest of it is not in the image (a plate laid along a cube's top edges, a
+  // cube on a bar's end). 0: off. Chosen on the traced selections of render seeds 7-38 (true
+  // recognitions' balances 32 and up, 6,000 of them; 1 false one under 30); on seeds 39-71, which it
+  // was not chosen on, 6 false recognitions lay under 30 and no true one under 40 (docs/benchmarks.md,
+  // session 39).
+  int min_own_balance = 30;
   double work_area_radius_m = 0.6;           // poses farther than this from the world origin (in x, y) are culled, m
   double below_table_tolerance_m = 0.010;    // poses whose box reaches deeper under z = 0 are culled, m (a raw
                                              // fit is weakest along the camera ray, and the editor lifts what is
