@@ -526,6 +526,11 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o.max_alternative_fits = 0;  // none: valid
   EXPECT_TRUE(o.Validate().ok());
   o = RecognizerOptions();
+  o.min_own_balance = -1;
+  EXPECT_NE(o.Validate().message().find("min_own_balance = -1 must be >= 0 (0: off)"), std::string::npos);
+  o.min_own_balance = 0;  // off: valid
+  EXPECT_TRUE(o.Validate().ok());
+  o = RecognizerOptions();
   o.alternatives_per_model = 0;
   EXPECT_NE(o.Validate().message().find("alternatives_per_model"), std::string::npos);
   o = RecognizerOptions();
