@@ -112,6 +112,8 @@ Status RecognizerOptions::Validate() const {
     return Status::InvalidInput("RecognizerOptions::contour_min_step_grey must be >= 0");
   TEACHSIM_RETURN_IF_ERROR(fraction("contour_max_hidden_coverage", contour_max_hidden_coverage));
   TEACHSIM_RETURN_IF_ERROR(fraction("contour_min_shown_share", contour_min_shown_share));
+  TEACHSIM_RETURN_IF_ERROR(fraction("contour_low_shown_share", contour_low_shown_share));
+  TEACHSIM_RETURN_IF_ERROR(fraction("contour_low_shown_score", contour_low_shown_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("matched_share_rescue_score", matched_share_rescue_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_score", min_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_coverage", min_coverage));
@@ -1618,6 +1620,7 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
     c.rank_score = score;
     return c;
   };
+  const double min_shown = std::min(options_.contour_min_shown_share, options_.contour_low_shown_share);
   std::vector<Occluder> in_front;
   std::vector<size_t> passed;
   for (const Rejected& r : rejected_) {
@@ -1667,12 +1670,17 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
         hiding.contour = &contour;
         hiding.K = K_;
         const HiddenOutline hidden = hidden_outline(hiding);
-        if (hidden.share < options_.occlusion_min_hidden_share ||
-            1 - hidden.share < options_.contour_min_shown_share ||
+        const double shown = 1 - hidden.share;
+        if (hidden.share < options_.occlusion_min_hidden_share || shown < min_shown ||
             hidden.coverage > options_.contour_max_hidden_coverage) {
           continue;
         }
         std::optional<Candidate> c = judge_hidden(r, hiding, hidden.share, &free_matches);
+        // Less than contour_min_shown_share in view: only with the higher evidence score.
+        if (c && shown < options_.contour_min_shown_share &&
+            c->rank_score < options_.contour_low_shown_score) {
+          c.reset();
+        }
         if (c && (!best || c->rank_score > best->rank_score) &&
             !ContinuesPastHiddenEnd(model, camera_, pose, contour, detection_.edge_map, options_) &&
             !AmbiguousExtent(models_, r.model, pose, contour, K_)) {

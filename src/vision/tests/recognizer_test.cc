@@ -548,6 +548,8 @@ TEST(OptionsTest, ValidateNamesTheField) {
       {"contour_min_step_grey", [](RecognizerOptions& r) { r.contour_min_step_grey = -1; }},
       {"contour_max_hidden_coverage", [](RecognizerOptions& r) { r.contour_max_hidden_coverage = 1.5; }},
       {"contour_min_shown_share", [](RecognizerOptions& r) { r.contour_min_shown_share = -0.5; }},
+      {"contour_low_shown_share", [](RecognizerOptions& r) { r.contour_low_shown_share = 1.5; }},
+      {"contour_low_shown_score", [](RecognizerOptions& r) { r.contour_low_shown_score = -0.1; }},
   };
   for (const auto& [field, set] : contour_limits) {
     o = RecognizerOptions();
@@ -1443,9 +1445,9 @@ TEST(OcclusionTest, ABarWhoseMiddleAnUnknownPoleHidesIsFoundBesideItsContours) {
   for (const bool on : {false, true}) {
     RecognizerOptions options = SmallIndexOptions();
     options.occlusion_contours = on;
-    // More than half the outline is hidden; on these clean edges, verification alone passes the bar
-    // with up to about half hidden.
-    options.contour_min_shown_share = 0.4;
+    // More than half the outline is hidden: judged by the rule for less than contour_min_shown_share
+    // in view (RecognizerOptions::contour_low_shown_share), on these clean edges with an evidence
+    // score above its contour_low_shown_score.
     auto result = RecognizeCubesAndBars(image, options, nullptr);
     ASSERT_TRUE(result.ok()) << result.status().message();
     ASSERT_EQ(result->objects.size(), on ? 1u : 0u) << "contours " << on;
@@ -1455,9 +1457,21 @@ TEST(OcclusionTest, ABarWhoseMiddleAnUnknownPoleHidesIsFoundBesideItsContours) {
     EXPECT_LT((r.raw_world_T_object.translation - bar_pose.translation).norm(), 0.002);
     EXPECT_LT(SymmetricRotationAngle(Bar(), r.raw_world_T_object, bar_pose), 1.0 * M_PI / 180);
   }
+  // Without the rule for more than half hidden, or asking it for a score no pose reaches, the bar
+  // is not found.
+  for (const bool rule_off : {true, false}) {
+    RecognizerOptions options = SmallIndexOptions();
+    if (rule_off) {
+      options.contour_low_shown_share = options.contour_min_shown_share;
+    } else {
+      options.contour_low_shown_score = 1;
+    }
+    auto result = RecognizeCubesAndBars(image, options, nullptr);
+    ASSERT_TRUE(result.ok()) << result.status().message();
+    EXPECT_EQ(result->objects.size(), 0u) << "rule off " << rule_off;
+  }
   // With cubes alone in the library, no cube is taken for either end in view.
   RecognizerOptions options = SmallIndexOptions();
-  options.contour_min_shown_share = 0.4;
   auto cubes = Recognizer::Create({{Cube()}}, options, "");
   ASSERT_TRUE(cubes.ok());
   auto result = cubes->Recognize(image, camera, nullptr);

@@ -33,7 +33,9 @@
 // accepted recognitions partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits), no-contours
 // (no occluding contours: vision::RecognizerOptions::occlusion_contours), no-pole-ends (no strips
 // between flanks that end inside a pose's image: contour_pole_ends), contourlen-PX, contourstep-GREY,
-// contourcover-X and contourshown-X (their limits), refitrms-PX,
+// contourcover-X and contourshown-X (their limits), contourlowshown-X and contourlowscore-X (more than
+// half hidden behind a contour: the share in view and the evidence score it needs; contourlowshown-0.5:
+// off), refitrms-PX,
 // refitcoverage-X, refitscore-X, refitinimage-X (the edge-point refit's limits; no-refit switches it off),
 // balance-N (the non-maximum suppression's pairwise margin; 0: off), ownlead-N and rankshare-X (its second
 // way to replace a rival; ownlead-0: off), inimagelead-X and tieshare-X (its third way, where neither own
@@ -542,6 +544,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"contourcover", [o](double v) { o->contour_max_hidden_coverage = v; }},
       {"contourstep", [o](double v) { o->contour_min_step_grey = v; }},
       {"contourshown", [o](double v) { o->contour_min_shown_share = v; }},
+      {"contourlowshown", [o](double v) { o->contour_low_shown_share = v; }},
+      {"contourlowscore", [o](double v) { o->contour_low_shown_score = v; }},
       {"rescue", [o](double v) { o->matched_share_rescue_score = v; }},
 
       {"refitrms", [o](double v) { o->refit_max_rms_px = v; }},
@@ -567,6 +571,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
            "stepgrey-X, stepoffset-PX, alternatives-N, permodel-N, matchedinimage-X, refitrms-PX, "
            "refitcoverage-X, refitscore-X, contourlen-PX, contourcover-X, contourstep-GREY, contourshown-X, "
+           "contourlowshown-X, contourlowscore-X, "
            "refitinimage-X, "
            "balance-N, ownlead-N, rankshare-X, inimagelead-X, tieshare-X, ownbalance-N, centreslack-MM)";
   }

@@ -170,6 +170,15 @@ struct RecognizerOptions {
   double contour_min_step_grey = 30;
   double contour_max_hidden_coverage = 0.3;
   double contour_min_shown_share = 0.5;
+  // More than half hidden behind a contour: a pose with less of its outline in view than
+  // contour_min_shown_share, but at least contour_low_shown_share, is a placement of the support-plane
+  // source and is accepted by the occlusion pass only with an evidence score of at least
+  // contour_low_shown_score (where the true and the wrong extents of a block cut by the occluder are
+  // hard to tell apart, the wrong ones scored 0.986-0.995 and the true ones mostly 0.997 or more on
+  // render seeds 7-38; docs/benchmarks.md, session 41). contour_low_shown_share >=
+  // contour_min_shown_share turns it off.
+  double contour_low_shown_share = 0.4;
+  double contour_low_shown_score = 0.996;
   double min_score = 0.7;                    // edge support where the image shows contrast across the predicted edge, 0..1
   double min_coverage = 0.35;                // edge support along all visible predicted edges, 0..1
   double min_edge_contrast = 25;             // grey levels across a predicted edge (5 px apart) for it to count as informative
