@@ -26,7 +26,7 @@ struct TrueObject {
 struct Case {
   std::string image_path;
   scene::CameraSpec camera;
-  scene::Scene fixed_world;  // the table (top at z = 0) and the frame's four walls
+  scene::Scene fixed_world;  // the table (top at z = 0) and the frame's four walls (FixedWorldScene)
   std::vector<TrueObject> objects;
 };
 
@@ -71,22 +71,15 @@ inline std::vector<Case> Cases(const json::Json& truth) {
     out.camera.k3 = cam.at("k3").get<double>();
     out.camera.gamma = kDevSetGamma;
     out.camera.world_T_camera = PoseOf(cam);
-    out.fixed_world.objects.push_back(scene::BoxObject("table", true, {1.2, 1.0, 0.05},
-                                                       geometry::Pose3::Translation({0, 0, -0.025})));
+    // The fixed world as the benchmark builds it (FixedWorldScene), so that the test and
+    // `teachsim bench recognize` judge the same recognitions.
     const auto& f = c.at("frame");
-    const geometry::Pose3 world_T_frame = PoseOf(f);
-    const double ix = f.at("inner")[0].get<double>(), iy = f.at("inner")[1].get<double>();
-    const double wall = f.at("wall").get<double>(), h = f.at("height").get<double>();
-    const struct {
-      Eigen::Vector3d size, centre;
-    } walls[4] = {{{ix + 2 * wall, wall, h}, {0, -(iy + wall) / 2, h / 2}},
-                  {{ix + 2 * wall, wall, h}, {0, (iy + wall) / 2, h / 2}},
-                  {{wall, iy, h}, {-(ix + wall) / 2, 0, h / 2}},
-                  {{wall, iy, h}, {(ix + wall) / 2, 0, h / 2}}};
-    for (int k = 0; k < 4; ++k) {
-      out.fixed_world.objects.push_back(scene::BoxObject("frame", true, walls[k].size,
-                                                         world_T_frame * geometry::Pose3::Translation(walls[k].centre)));
-    }
+    FrameTruth frame;
+    frame.world_T_frame = PoseOf(f);
+    frame.inner_m = Eigen::Vector2d(f.at("inner")[0].get<double>(), f.at("inner")[1].get<double>());
+    frame.wall_m = f.at("wall").get<double>();
+    frame.height_m = f.at("height").get<double>();
+    out.fixed_world = FixedWorldScene(frame);
     for (const auto& o : c.at("objects")) {
       out.objects.push_back({o.at("model").get<std::string>(), PoseOf(o), o.at("visible_fraction").get<double>()});
     }

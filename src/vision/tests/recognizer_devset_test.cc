@@ -178,6 +178,10 @@ TEST(DevSetTest, RecognizesTheBlocksOfTheTwelveImages) {
   // editor's fit places them on the linear light: p90 0.69 -> 0.30 deg, the largest 1.01 -> 0.43
   // (session 29). The goal, 0.5 deg, holds the p90.
   EXPECT_GE(bins[0].found, static_cast<int>(0.92 * bins[0].objects));
+  // Half hidden (0.4-0.7 visible), against the goal of 70 %: 4 of the 6. Until session 41 this test
+  // built the table 1.2 x 1.0 m where the benchmark builds it 1.2 x 1.2 m (FixedWorldScene), and
+  // case_007's tall block, 0.63 visible, was found by the benchmark and missed here.
+  EXPECT_GE(bins[1].found, 4);
   EXPECT_EQ(unoccluded.objects, 27);
   EXPECT_GE(unoccluded.found, unoccluded.objects - 1);
   EXPECT_EQ(false_positives, 0);
