@@ -1620,7 +1620,7 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
     c.rank_score = score;
     return c;
   };
-  const double min_shown = std::min(options_.contour_min_shown_share, options_.contour_low_shown_share);
+  const double min_shown = options_.LeastContourShownShare();
   std::vector<Occluder> in_front;
   std::vector<size_t> passed;
   for (const Rejected& r : rejected_) {

@@ -97,7 +97,7 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera,
 // A placement short of the support threshold, scored again with the outline on one side of an
 // occluding contour across its image left out (RecognizerOptions::occlusion_contours): the support
 // of the samples in view (every 3 px), over the contours and sides where at least
-// contour_low_shown_share (or contour_min_shown_share, the smaller) of the samples are in view, at least
+// RecognizerOptions::LeastContourShownShare() of the samples are in view, at least
 // occlusion_min_hidden_share hidden and at most contour_max_hidden_coverage of the hidden ones supported. -1
 // when none reaches support_min_score; else the best side's support times its share in view.
 double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& camera, const Eigen::Matrix3d& K,
@@ -138,7 +138,7 @@ double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& cam
       }
       const int count = static_cast<int>(samples.size()), shown = count - hidden;
       if (hidden < options.occlusion_min_hidden_share * count ||
-          shown < std::min(options.contour_min_shown_share, options.contour_low_shown_share) * count ||
+          shown < options.LeastContourShownShare() * count ||
           hidden_supported > options.contour_max_hidden_coverage * hidden) {
         continue;
       }

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -274,6 +275,9 @@ struct RecognizerOptions {
   double table_snap_distance_m = 0.01;       // an object whose lowest point is this close to a support rests on it, m
   double table_snap_max_tilt_deg = 6;        // ... when one of its faces is this close to horizontal, deg
   [[nodiscard]] Status Validate() const;
+  // The least share of a pose's outline in view that any judgement beside an occluding contour
+  // takes: contour_low_shown_share, or contour_min_shown_share when that is smaller (the rule off).
+  double LeastContourShownShare() const { return std::min(contour_min_shown_share, contour_low_shown_share); }
 };
 
 struct Recognition {
