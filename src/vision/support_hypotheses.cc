@@ -111,10 +111,10 @@ double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& cam
   }
   const uint16_t visible = VisibleBoxEdges(size_m, camera_T_object.Inverse().translation);
   thread_local std::vector<ContourOccluder> occlusions;
-  // Flanks that end inside the box's image are left out here (ends_inside false): they are for
-  // the occlusion pass; here they took the stage 1.4-3 ms longer per image for 2 more blocks in 720
-  // images (docs/benchmarks.md, session 38).
-  ContourOcclusions(contours, BoxImage(px, visible), &occlusions, /*ends_inside=*/false);
+  // Flanks that end inside the box's image only with support_pole_ends (off: the stage took 3.5 ms
+  // longer per image for 14 more blocks in 3900 images; docs/benchmarks.md, sessions 38 and 42).
+  ContourOcclusions(contours, BoxImage(px, visible), &occlusions,
+                    options.contour_pole_ends && options.support_pole_ends);
   if (occlusions.empty()) return -1;
   thread_local std::vector<OutlineSample> samples;
   thread_local std::vector<uint8_t> supported;

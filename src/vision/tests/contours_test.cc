@@ -289,5 +289,60 @@ TEST(ContoursTest, PlacementsBehindAContourFillOnlyTheRoomThoseInViewLeave) {
   for (size_t i = 0; i < unaided.size(); ++i) EXPECT_EQ(unaided[i].score, all[i].score) << "hypothesis " << i;
 }
 
+// A bar on the table whose far end a short dark pole hides, the pole's top inside the bar's image
+// (its two flanks end there, neither runs across): the support-plane source scores the bar where
+// it stands on the outline beside the flanks' strip only with support_pole_ends and
+// contour_pole_ends (its whole outline shows too little support).
+TEST(ContoursTest, APlacementBesideAPoleWhoseTopIsInFrontNeedsSupportPoleEnds) {
+  const Camera camera = synthetic::SyntheticCamera();
+  const Model bar{"bar90", {0.09, 0.045, 0.045}}, cube{"cube45", {0.045, 0.045, 0.045}};
+  const ModelLibrary library{{cube, bar}};
+  const geometry::Pose3 bar_pose(Eigen::Quaterniond(Eigen::AngleAxisd(0.86, Eigen::Vector3d::UnitZ())),
+                                 {0, 0, 0.0225});
+  const geometry::Pose3 camera_T_bar = camera.camera_T_world() * bar_pose;
+  std::array<Eigen::Vector2d, 8> px;
+  for (int v = 0; v < 8; ++v) {
+    px[static_cast<size_t>(v)] = (camera.K() * (camera_T_bar * BoxVertex(bar.box_size_m, v))).hnormalized();
+  }
+  double lo = 1e9, hi = -1e9, top = 1e9, bottom = -1e9;
+  for (const Eigen::Vector2d& p : px) {
+    lo = std::min(lo, p.x()), hi = std::max(hi, p.x());
+    top = std::min(top, p.y()), bottom = std::max(bottom, p.y());
+  }
+  // The pole over the bar's right part (from 0.25 to 1.15 of its image's width), from the image's
+  // bottom up to 0.3 of the way down the bar's image.
+  cv::Mat image = synthetic::RenderBoxes(camera, {{bar.box_size_m, bar_pose}}, 7);
+  const double centre = lo + 0.7 * (hi - lo), half = (hi - lo) / 2.2;
+  cv::rectangle(image,
+                cv::Point(static_cast<int>(centre - half), static_cast<int>(top + 0.3 * (bottom - top))),
+                cv::Point(static_cast<int>(centre + half), image.rows - 1), cv::Scalar(20), cv::FILLED);
+  RecognizerOptions options;
+  const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+  const std::vector<ImageLine> contours = OccludingContours(detection, camera, options);
+  const std::vector<ImageCorner> corners = FindCorners(detection.lines, options);
+  const BoxImage box_image(px, VisibleBoxEdges(bar.box_size_m, camera_T_bar.Inverse().translation));
+  ASSERT_GE(contours.size(), 2u);
+  for (const ImageLine& c : contours) EXPECT_FALSE(CrossesBoxImage(c, box_image));
+
+  // Whether a hypothesis is the bar where it stands; whether that one is judged behind a contour.
+  auto at_bar = [&](bool support_pole_ends, bool contour_pole_ends, bool* behind) {
+    options.support_pole_ends = support_pole_ends;
+    options.contour_pole_ends = contour_pole_ends;
+    for (const SupportHypothesis& h :
+         SupportHypotheses(library, camera, detection, corners, {SupportPlane{}}, options, contours)) {
+      if (h.model == 1 && (h.world_T_object.translation - bar_pose.translation).norm() < 0.002) {
+        *behind = h.behind_contour;
+        return true;
+      }
+    }
+    return false;
+  };
+  bool behind = false;
+  EXPECT_TRUE(at_bar(true, true, &behind));
+  EXPECT_TRUE(behind);
+  EXPECT_FALSE(at_bar(false, true, &behind));
+  EXPECT_FALSE(at_bar(true, false, &behind));
+}
+
 }  // namespace
 }  // namespace teachsim::vision

@@ -32,7 +32,8 @@
 // unjudged; the evidence score that accepts them), no-occlusion (no second judgement of poses that
 // accepted recognitions partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits), no-contours
 // (no occluding contours: vision::RecognizerOptions::occlusion_contours), no-pole-ends (no strips
-// between flanks that end inside a pose's image: contour_pole_ends), contourlen-PX, contourstep-GREY,
+// between flanks that end inside a pose's image: contour_pole_ends; support-pole-ends: in the
+// support-plane source too, support_pole_ends), contourlen-PX, contourstep-GREY,
 // contourcover-X and contourshown-X (their limits), contourlowshown-X and contourlowscore-X (more than
 // half hidden behind a contour: the share in view and the evidence score it needs; contourlowshown-0.5:
 // off), refitrms-PX,
@@ -505,6 +506,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "no-occlusion") return o->occlusion_reverify = false, std::nullopt;
   if (a == "no-contours") return o->occlusion_contours = false, std::nullopt;
   if (a == "no-pole-ends") return o->contour_pole_ends = false, std::nullopt;
+  if (a == "support-pole-ends") return o->support_pole_ends = true, std::nullopt;
   if (a == "no-rescue") return o->matched_share_rescue = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
   const std::size_t dash = a.rfind('-');
@@ -563,7 +565,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, no-refit, skip-any-claim, "
-           "matched-whole-edges, no-occlusion, no-contours, no-pole-ends, no-rescue, rescue-X, "
+           "matched-whole-edges, no-occlusion, no-contours, no-pole-ends, support-pole-ends, no-rescue, "
+           "rescue-X, "
            "rules-only, index-N, "
            "support-N, "
            "contrast-X, "
@@ -793,7 +796,7 @@ int Run(const BenchArgs& args) {
             }
             std::fprintf(stderr,
                          "%s false %s at (%.0f, %.0f) world (%.1f, %.1f, %.1f) mm, lowest point %.1f mm: "
-                         "score %.2f, matched "
+                         "score %.3f, matched "
                          "%.2f, rms %.2f px\n",
                          c.name.c_str(), r.model.c_str(), p ? p->x() : -1, p ? p->y() : -1,
                          1000 * r.world_T_object.translation.x(), 1000 * r.world_T_object.translation.y(),
@@ -829,13 +832,14 @@ int Run(const BenchArgs& args) {
                 stderr,
                 "%s found %s %.2f: rotation %.2f deg (raw %.2f; tilt %.2f, truth's %.2f), across %.2f mm, "
                 "along %.2f "
-                "mm, rms %.2f px\n",
+                "mm, rms %.2f px, score %.3f, matched %.2f\n",
                 c.name.c_str(), t.model.c_str(), t.visible_fraction, o.rotation_error_rad * 180 / kPi,
                 vision::SymmetricRotationError(t.world_T_object.rotation, r.raw_world_T_object.rotation,
                                                vision::BoxSymmetries(truth->model_sizes_m.at(t.model))) *
                     180 / kPi,
                 tilt_deg(r.world_T_object.rotation), tilt_deg(t.world_T_object.rotation),
-                o.position_error.across_m * 1000, o.position_error.along_m * 1000, r.reprojection_rms_px);
+                o.position_error.across_m * 1000, o.position_error.along_m * 1000, r.reprojection_rms_px,
+                r.score, r.matched_edge_fraction);
           }
         }
         if (const char* features = std::getenv("TEACHSIM_RECOGNIZE_FEATURES"); features != nullptr) {

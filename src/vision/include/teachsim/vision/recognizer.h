@@ -167,6 +167,12 @@ struct RecognizerOptions {
   // 7-71 (3900 images): found 0.4-0.7 visible 345 -> 359, < 0.4 21 -> 22, >= 0.7 11598 -> 11602,
   // false detections 179 -> 181 (docs/benchmarks.md, session 38).
   bool contour_pole_ends = true;
+  // The support-plane source takes them too (with contour_pole_ends): a placement short of
+  // support_min_score is scored again on the outline beside such flanks. On against off, render seeds
+  // 7-71 (3900 images): found 0.4-0.7 visible 379 -> 392, < 0.4 29 -> 33, >= 0.7 +1, false detections
+  // 176 -> 175, but the support-plane stage took 3.5 ms longer per image (seeds 7-12: images over
+  // 50 ms 8-11 -> 33; docs/benchmarks.md, session 42).
+  bool support_pole_ends = false;
   double contour_min_length_px = 60;
   double contour_min_step_grey = 30;
   double contour_max_hidden_coverage = 0.3;
