@@ -224,16 +224,26 @@ TEST(ContoursTest, APoseThatGoesOnPastItsHiddenEndIsTold) {
   }
 }
 
+// The scene of the placement tests below: a bar on the table in the synthetic camera's view, in a
+// library of a cube and the bar (model 1).
+struct BarOnTheTable {
+  Camera camera = synthetic::SyntheticCamera();
+  Model bar{"bar90", {0.09, 0.045, 0.045}};
+  ModelLibrary library{{Model{"cube45", {0.045, 0.045, 0.045}}, bar}};
+  geometry::Pose3 bar_pose{Eigen::Quaterniond(Eigen::AngleAxisd(0.86, Eigen::Vector3d::UnitZ())),
+                           {0, 0, 0.0225}};
+};
+
 // A bar on the table whose middle a dark pole hides (a third of the bar's image wide): placements
 // short of the support threshold with the pole near their corner are scored again on the outline in
 // view; they come after all those in full view, best first, and only where these leave room under
 // max_support_hypotheses.
 TEST(ContoursTest, PlacementsBehindAContourFillOnlyTheRoomThoseInViewLeave) {
-  const Camera camera = synthetic::SyntheticCamera();
-  const Model bar{"bar90", {0.09, 0.045, 0.045}}, cube{"cube45", {0.045, 0.045, 0.045}};
-  const ModelLibrary library{{cube, bar}};
-  const geometry::Pose3 bar_pose(Eigen::Quaterniond(Eigen::AngleAxisd(0.86, Eigen::Vector3d::UnitZ())),
-                                 {0, 0, 0.0225});
+  const BarOnTheTable scene;
+  const Camera& camera = scene.camera;
+  const Model& bar = scene.bar;
+  const ModelLibrary& library = scene.library;
+  const geometry::Pose3& bar_pose = scene.bar_pose;
   double lo = 1e9, hi = -1e9;
   for (int v = 0; v < 8; ++v) {
     const double x = camera.Project(bar_pose * BoxVertex(bar.box_size_m, v))->x();
@@ -294,11 +304,11 @@ TEST(ContoursTest, PlacementsBehindAContourFillOnlyTheRoomThoseInViewLeave) {
 // it stands on the outline beside the flanks' strip only with support_pole_ends and
 // contour_pole_ends (its whole outline shows too little support).
 TEST(ContoursTest, APlacementBesideAPoleWhoseTopIsInFrontNeedsSupportPoleEnds) {
-  const Camera camera = synthetic::SyntheticCamera();
-  const Model bar{"bar90", {0.09, 0.045, 0.045}}, cube{"cube45", {0.045, 0.045, 0.045}};
-  const ModelLibrary library{{cube, bar}};
-  const geometry::Pose3 bar_pose(Eigen::Quaterniond(Eigen::AngleAxisd(0.86, Eigen::Vector3d::UnitZ())),
-                                 {0, 0, 0.0225});
+  const BarOnTheTable scene;
+  const Camera& camera = scene.camera;
+  const Model& bar = scene.bar;
+  const ModelLibrary& library = scene.library;
+  const geometry::Pose3& bar_pose = scene.bar_pose;
   const geometry::Pose3 camera_T_bar = camera.camera_T_world() * bar_pose;
   std::array<Eigen::Vector2d, 8> px;
   for (int v = 0; v < 8; ++v) {
