@@ -142,6 +142,34 @@ double SymmetricRotationError(const Eigen::Quaterniond& world_R_truth, const Eig
   return 2.0 * std::atan2(best.vec().norm(), std::abs(best.w()));
 }
 
+double SymmetricProjectionRms(const Camera& camera, const Eigen::Vector3d& size_m,
+                              const geometry::Pose3& world_T_truth, const geometry::Pose3& world_T_estimate,
+                              const std::vector<Eigen::Quaterniond>& symmetries) {
+  std::array<Eigen::Vector2d, 8> estimate_px;
+  std::array<Eigen::Vector3d, 8> corner;
+  for (int i = 0; i < 8; ++i) {
+    corner[static_cast<std::size_t>(i)] = 0.5 * Eigen::Vector3d((i & 1) != 0 ? size_m.x() : -size_m.x(),
+                                                                (i & 2) != 0 ? size_m.y() : -size_m.y(),
+                                                                (i & 4) != 0 ? size_m.z() : -size_m.z());
+    const auto p = camera.Project(world_T_estimate * corner[static_cast<std::size_t>(i)]);
+    if (!p) return kNaN;
+    estimate_px[static_cast<std::size_t>(i)] = *p;
+  }
+  double best = kNaN;
+  for (const Eigen::Quaterniond& s : symmetries) {
+    // The truth's pose under symmetry s: its corner s * c stands where the estimate's corner c does.
+    double sum = 0;
+    for (int i = 0; i < 8; ++i) {
+      const auto p = camera.Project(world_T_truth * (s * corner[static_cast<std::size_t>(i)]));
+      if (!p) return kNaN;
+      sum += (*p - estimate_px[static_cast<std::size_t>(i)]).squaredNorm();
+    }
+    const double rms = std::sqrt(sum / 8);
+    if (!(rms >= best)) best = rms;
+  }
+  return best;
+}
+
 PositionError SplitPositionError(const Eigen::Vector3d& truth_in_world, const Eigen::Vector3d& estimate_in_world,
                                  const Eigen::Vector3d& camera_centre_in_world) {
   const Eigen::Vector3d sight = (truth_in_world - camera_centre_in_world).normalized();
@@ -204,9 +232,11 @@ Status MatchOptions::Validate() const {
   return Status::Ok();
 }
 
-Result<ImageEvaluation> EvaluateImage(const std::vector<TruthObject>& truth, const std::vector<Detection>& detections,
+Result<ImageEvaluation> EvaluateImage(const std::vector<TruthObject>& truth,
+                                      const std::vector<Detection>& detections,
                                       const std::map<std::string, Eigen::Vector3d>& model_sizes_m,
-                                      const Eigen::Vector3d& camera_centre_in_world, const MatchOptions& options) {
+                                      const Eigen::Vector3d& camera_centre_in_world,
+                                      const MatchOptions& options, const Camera* camera) {
   TEACHSIM_RETURN_IF_ERROR(options.Validate());
   std::vector<std::vector<Eigen::Quaterniond>> symmetries;
   for (const TruthObject& t : truth) {
@@ -272,6 +302,12 @@ Result<ImageEvaluation> EvaluateImage(const std::vector<TruthObject>& truth, con
     o.rotation_error_rad = best_rotation;
     o.position_error = best_error;
     o.reprojection_rms_px = det.reprojection_rms_px;
+    if (camera != nullptr) {
+      o.truth_projection_rms_px =
+          SymmetricProjectionRms(*camera, model_sizes_m.at(truth[static_cast<std::size_t>(best)].model),
+                                 truth[static_cast<std::size_t>(best)].world_T_object, det.world_T_object,
+                                 symmetries[static_cast<std::size_t>(best)]);
+    }
   }
   return out;
 }
@@ -391,6 +427,7 @@ void SummaryBuilder::Add(const ImageEvaluation& evaluation, const ImageTime& tim
     across_mm_.push_back(o.position_error.across_m * 1e3);
     along_mm_.push_back(o.position_error.along_m * 1e3);
     rms_px_.push_back(o.reprojection_rms_px);
+    truth_projection_px_.push_back(o.truth_projection_rms_px);
     if (o.rotation_error_rad <= goals_.rotation_rad && o.position_error.across_m <= goals_.across_m &&
         o.position_error.along_m <= goals_.along_m) {
       ++counts_.within_goals;
@@ -404,6 +441,7 @@ Summary SummaryBuilder::Build() const {
   s.across_mm = Summarize(across_mm_);
   s.along_mm = Summarize(along_mm_);
   s.reprojection_rms_px = Summarize(rms_px_);
+  s.truth_projection_rms_px = Summarize(truth_projection_px_);
   s.time_ms = Summarize(time_ms_);
   for (const auto& [stage, values] : stage_ms_) s.stage_time_ms[stage] = Summarize(values);
   return s;
@@ -450,6 +488,7 @@ json::Json SummaryToJson(const Summary& s) {
           {"position_error_across_mm", StatsToJson(s.across_mm)},
           {"position_error_along_mm", StatsToJson(s.along_mm)},
           {"reprojection_rms_px", StatsToJson(s.reprojection_rms_px)},
+          {"truth_projection_rms_px", StatsToJson(s.truth_projection_rms_px)},
           {"time_per_image_ms", StatsToJson(s.time_ms)},
           {"time_goal_ms", kTimeGoalMs},
           {"images_over_time_goal", s.over_time_goal},

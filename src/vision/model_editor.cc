@@ -19,6 +19,67 @@ std::string Mm(double m) {
   return buf;
 }
 
+// The ladder check (RecognizerOptions::ladder_search_m) of a recognition resting on the table: a thin
+// block beside its shadow shows several parallel edges a thickness apart, and a fit can settle with
+// its outline one rung off (a plate's far edge on a grain line of its top, its near edge on its
+// shadow's). Only a pose whose outline is short of edges (coverage under ladder_max_coverage) is
+// looked at. Moves along each horizontal side on the table, ranked by NetSupportPx at the moved pose;
+// the best, fitted again there, replaces the pose when it beats it by ladder_margin and its
+// evidence score by ladder_score_gain.
+void LadderCheck(const Model& model, const Camera& camera, const LineDetection& detection,
+                 const std::vector<Occluder>& others, const RecognizerOptions& options, Recognition* r) {
+  auto net = [&](const geometry::Pose3& world_T_object) {
+    return NetSupportPx(
+        EvaluateOutline(model, camera, camera.camera_T_world() * world_T_object, detection, options));
+  };
+  const PoseEvidence here =
+      EvaluateOutline(model, camera, camera.camera_T_world() * r->world_T_object, detection, options);
+  if (!(here.coverage < options.ladder_max_coverage)) return;
+  const double current = NetSupportPx(here);
+  double best = current;
+  geometry::Pose3 best_pose = r->world_T_object;
+  const Eigen::Matrix3d rot = r->world_T_object.RotationMatrix();
+  for (int a = 0; a < 3; ++a) {
+    Eigen::Vector3d side = rot.col(a);
+    if (std::abs(side.z()) > 0.5) continue;  // the vertical axis
+    side.z() = 0;
+    side.normalize();
+    for (double sign : {-1.0, 1.0}) {
+      for (double d = options.ladder_step_m; d <= options.ladder_search_m + 1e-9;
+           d += options.ladder_step_m) {
+        geometry::Pose3 moved = r->world_T_object;
+        moved.translation += sign * d * side;
+        const double v = net(moved);
+        if (v > best) best = v, best_pose = moved;
+      }
+    }
+  }
+  if (!(best > current * (1 + options.ladder_margin))) return;
+  const PolishResult polished = PolishPose(
+      model, camera, camera.camera_T_world() * best_pose, detection.edge_map, true, 3,
+      [&](const Eigen::Vector3d& point) { return HiddenByAny(others, point); },
+      /*weigh_above=*/2 * options.canny_high);
+  if (!polished.ok) return;
+  const geometry::Pose3 fitted = camera.world_T_camera() * polished.fit.camera_T_object;
+  const double after = net(fitted);
+  if (!(after > current * (1 + options.ladder_margin))) return;
+  auto score = [&](const geometry::Pose3& world_T_object) {
+    return EvidenceScore(
+        EvaluatePose(model, camera, camera.camera_T_world() * world_T_object, detection, options));
+  };
+  const double score_before = score(r->world_T_object), score_after = score(fitted);
+  if (!(score_after >= score_before + options.ladder_score_gain)) return;
+  char buf[200];
+  std::snprintf(buf, sizeof(buf),
+                "moved %.1f mm along its side on the table, where its outline has more edge support (%.0f -> "
+                "%.0f px, score %.3f -> %.3f)",
+                1000 * (fitted.translation - r->world_T_object.translation).norm(), current, after,
+                score_before, score_after);
+  r->world_T_object = fitted;
+  r->reprojection_rms_px = polished.rms_px;
+  r->adjustments.push_back(buf);
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------- the fixed world and boxes
@@ -79,9 +140,10 @@ Penetration PartPenetration(const Model& model, const geometry::Pose3& world_T_o
 
 // ---------------------------------------------------------------- the model editor's rules
 
-void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, const EdgeMap& edge_map,
+void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, const LineDetection& detection,
                            const FixedWorld& fixed, const RecognizerOptions& options,
                            std::vector<Recognition>* objects_io) {
+  const EdgeMap& edge_map = detection.edge_map;
   std::vector<Recognition>& objects = *objects_io;
   std::vector<bool> resting(objects.size(), false);
   const Eigen::Vector3d camera_centre = camera.world_T_camera().translation;
@@ -156,6 +218,7 @@ void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, con
                       r.world_T_object.rotation.angularDistance(before.rotation) * 180 / M_PI);
         r.adjustments.push_back(buf);
       }
+      if (options.ladder_search_m > 0) LadderCheck(model, camera, detection, others, options, &r);
     }
   }
   // Interpenetrating recognitions: the less certain one moves by the smallest separating move

@@ -94,7 +94,7 @@ inline bool HiddenByAny(const std::vector<Occluder>& occluders, const Eigen::Vec
 // adjustments: a recognition near the table is levelled and rested on it along the camera ray, then
 // fitted again there to the image's edge points; interpenetrating recognitions are separated by
 // the smallest moves, and pushed out of fixed objects.
-void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, const EdgeMap& edge_map,
+void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, const LineDetection& detection,
                            const FixedWorld& fixed, const RecognizerOptions& options,
                            std::vector<Recognition>* objects_io);
 

@@ -124,6 +124,16 @@ Status RecognizerOptions::Validate() const {
   }
   if (!(min_step_grey >= 0)) return Status::InvalidInput("RecognizerOptions::min_step_grey must be >= 0");
   TEACHSIM_RETURN_IF_ERROR(positive("max_reprojection_rms_px", max_reprojection_rms_px));
+  if (!(ladder_search_m >= 0 && ladder_search_m <= 0.1)) {
+    return Status::InvalidInput(
+        "RecognizerOptions::ladder_search_m must be in [0, 0.1] (0: the ladder check off)");
+  }
+  if (ladder_search_m > 0 && !(ladder_step_m >= 0.2e-3 && ladder_step_m <= ladder_search_m)) {
+    return Status::InvalidInput("RecognizerOptions::ladder_step_m must be in [0.0002, ladder_search_m]");
+  }
+  if (!(ladder_margin >= 0)) return Status::InvalidInput("RecognizerOptions::ladder_margin must be >= 0");
+  TEACHSIM_RETURN_IF_ERROR(fraction("ladder_score_gain", ladder_score_gain));
+  TEACHSIM_RETURN_IF_ERROR(fraction("ladder_max_coverage", ladder_max_coverage));
   TEACHSIM_RETURN_IF_ERROR(positive("refit_max_rms_px", refit_max_rms_px));
   TEACHSIM_RETURN_IF_ERROR(fraction("refit_min_coverage", refit_min_coverage));
   TEACHSIM_RETURN_IF_ERROR(fraction("refit_accept_score", refit_accept_score));
@@ -340,15 +350,6 @@ void ForEachOutlineSample(const Eigen::Vector3d& box_size_m, const geometry::Pos
 bool StepRule(const PoseEvidence& e, const RecognizerOptions& options) {
   return e.step_supported_px >= options.min_step_share * e.supported_px;
 }
-
-// The ranking of the non-maximum suppression: supported length less the unsupported length of the
-// predicted outline, so that of two poses explaining the same image edges the one that predicts less
-// outline where the image shows nothing (an upright slab over a cube and the table) comes first. By
-// supported length times support fraction, the benchmark's demo (cornering, seed 7) lost the cube to
-// such a slab. Only outline where the grey level steps across counts as supported length: a slab
-// laid onto a bar with one edge along a grain line of the bar's top otherwise outranked the bar
-// (its longer outline is as well supported, by the line).
-double NetSupportPx(const PoseEvidence& e) { return e.step_supported_px * (2 - 1 / std::max(e.coverage, 1e-3)); }
 
 // Image edges that run on past the ends of the predicted edges: a block's visible edges end at its
 // corners, but a smaller wrong model fitted onto part of a real block (a cube on a bar) or onto the
@@ -593,6 +594,17 @@ bool RestsOnTable(const Model& model, const geometry::Pose3& world_T_object, dou
 
 }  // namespace
 
+// NetSupportPx (recognition_stages.h), the ranking of the non-maximum suppression: supported length less the
+// unsupported length of the predicted outline, so that of two poses explaining the same image edges the one
+// that predicts less outline where the image shows nothing (an upright slab over a cube and the table) comes
+// first. By supported length times support fraction, the benchmark's demo (cornering, seed 7) lost the cube
+// to such a slab. Only outline where the grey level steps across counts as supported length: a slab laid onto
+// a bar with one edge along a grain line of the bar's top otherwise outranked the bar (its longer outline is
+// as well supported, by the line).
+double NetSupportPx(const PoseEvidence& e) {
+  return e.step_supported_px * (2 - 1 / std::max(e.coverage, 1e-3));
+}
+
 bool ContinuesPastHiddenEnd(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                             const ContourOccluder& occluder, const EdgeMap& edge_map,
                             const RecognizerOptions& options) {
@@ -805,6 +817,11 @@ PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geomet
   const EdgeMatchSet set = MatchEdges(model, camera.K(), camera_T_object, detection.lines, options.match_distance_px,
                                       options.match_angle_deg * M_PI / 180);
   return ComputeEvidence(model, camera, camera_T_object, detection, fixed, options, set);
+}
+
+PoseEvidence EvaluateOutline(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
+                             const LineDetection& detection, const RecognizerOptions& options) {
+  return ComputeEvidence(model, camera, camera_T_object, detection, nullptr, options, EdgeMatchSet{});
 }
 
 double EvidenceScore(const PoseEvidence& e) {
@@ -1797,7 +1814,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     r.covariance = b * c.fit.covariance_camera * b.transpose();
     result.objects.push_back(std::move(r));
   }
-  ApplyModelEditorRules(models_, camera, detection.edge_map, fixed, options_, &result.objects);
+  ApplyModelEditorRules(models_, camera, detection, fixed, options_, &result.objects);
   const auto t5 = Clock::now();
   result.timing_ms = {{"lines", Ms(t0, t1)},
                       {"groups", Ms(t1, t2)},

@@ -151,6 +151,70 @@ TEST(EvaluateImageTest, MatchesByModelAndPoseAndCountsTheRestAsFalse) {
   EXPECT_EQ(j["false_positives"], 3);
 }
 
+// A camera 0.6 m above the table looking straight down (its x along the world's x, y against it).
+Camera TopDownCamera(const Distortion& distortion = {}) {
+  const Eigen::Matrix3d world_R_camera = Eigen::Vector3d(1, -1, -1).asDiagonal();
+  return Camera(Intrinsics{800, 800, 319.5, 239.5}, distortion,
+                geometry::Pose3(Eigen::Quaterniond(world_R_camera), {0, 0, 0.6}), 640, 480);
+}
+
+TEST(ProjectionErrorTest, IsZeroUnderSymmetryAndGrowsWithTheShiftInTheImage) {
+  const Camera camera = TopDownCamera({-0.2, 0.01, 0, 0, 0});
+  const Eigen::Vector3d bar(0.09, 0.045, 0.045);
+  const auto symmetries = BoxSymmetries(bar);
+  const geometry::Pose3 truth(AxisAngle({0, 0, 1}, 0.3), {0.02, -0.01, 0.0225});
+  EXPECT_NEAR(SymmetricProjectionRms(camera, bar, truth, truth, symmetries), 0.0, 1e-9);
+  // The bar turned a half turn about its long axis, or a quarter turn (square section): the same bar.
+  for (double turn : {90.0, 180.0}) {
+    const geometry::Pose3 turned(truth.rotation * AxisAngle({1, 0, 0}, turn * kDeg), truth.translation);
+    EXPECT_NEAR(SymmetricProjectionRms(camera, bar, truth, turned, symmetries), 0.0, 1e-9) << turn;
+    // Without the symmetry its corners land elsewhere.
+    EXPECT_GT(SymmetricProjectionRms(camera, bar, truth, turned, {Eigen::Quaterniond::Identity()}), 10.0)
+        << turn;
+  }
+  // Without distortion, a shift of 1 mm across the view moves each corner by f * 1 mm / its depth
+  // (0.555-0.6 m): 1.33-1.44 px.
+  const Camera pinhole = TopDownCamera();
+  geometry::Pose3 shifted = truth;
+  shifted.translation.x() += 0.001;
+  const double rms = SymmetricProjectionRms(pinhole, bar, truth, shifted, symmetries);
+  EXPECT_GT(rms, 800 * 0.001 / 0.6);
+  EXPECT_LT(rms, 800 * 0.001 / 0.555);
+  // A pose whose corners are behind the camera has no figure.
+  geometry::Pose3 behind = truth;
+  behind.translation.z() = 1.0;
+  EXPECT_TRUE(std::isnan(SymmetricProjectionRms(pinhole, bar, truth, behind, symmetries)));
+}
+
+TEST(EvaluateImageTest, WithTheCameraEachMatchHasItsProjectionErrorAgainstTheTruth) {
+  const auto truth = TwoCubesAndASlab();
+  const Camera camera = TopDownCamera();
+  geometry::Pose3 slab = truth[2].world_T_object;
+  slab.translation.y() += 0.0005;
+  const std::vector<Detection> detections = {{"cube45", truth[0].world_T_object, 0.9}, {"slab", slab, 0.8}};
+  const Eigen::Vector3d eye = camera.world_T_camera().translation;
+  auto with = EvaluateImage(truth, detections, kSizes, eye, MatchOptions{}, &camera);
+  ASSERT_TRUE(with.ok()) << with.status().message();
+  EXPECT_NEAR(with->objects[0].truth_projection_rms_px, 0.0, 1e-9);
+  EXPECT_TRUE(std::isnan(with->objects[1].truth_projection_rms_px));  // missed
+  EXPECT_NEAR(with->objects[2].truth_projection_rms_px,
+              SymmetricProjectionRms(camera, kSizes.at("slab"), truth[2].world_T_object, slab,
+                                     BoxSymmetries(kSizes.at("slab"))),
+              1e-12);
+  EXPECT_GT(with->objects[2].truth_projection_rms_px, 0.6);
+  SummaryBuilder builder;
+  builder.Add(*with, 1.0);
+  const Summary s = builder.Build();
+  EXPECT_EQ(s.truth_projection_rms_px.count, 2);
+  EXPECT_DOUBLE_EQ(s.truth_projection_rms_px.max, with->objects[2].truth_projection_rms_px);
+  EXPECT_DOUBLE_EQ(SummaryToJson(s)["truth_projection_rms_px"]["max"].get<double>(),
+                   s.truth_projection_rms_px.max);
+  // Without it, none.
+  auto without = EvaluateImage(truth, detections, kSizes, eye, MatchOptions{});
+  ASSERT_TRUE(without.ok());
+  EXPECT_TRUE(std::isnan(without->objects[0].truth_projection_rms_px));
+}
+
 TEST(EvaluateImageTest, HiddenObjectsAreNotScoredAndUnknownModelsFail) {
   auto truth = TwoCubesAndASlab();
   truth[2].visible_fraction = 0.01;

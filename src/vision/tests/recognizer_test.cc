@@ -11,6 +11,7 @@
 #include <optional>
 #include <random>
 
+#include "../model_editor.h"
 #include "synthetic_scene.h"
 #include "teachsim/geometry/aabb.h"
 #include "teachsim/scene/scene.h"
@@ -550,6 +551,10 @@ TEST(OptionsTest, ValidateNamesTheField) {
       {"contour_min_shown_share", [](RecognizerOptions& r) { r.contour_min_shown_share = -0.5; }},
       {"contour_low_shown_share", [](RecognizerOptions& r) { r.contour_low_shown_share = 1.5; }},
       {"contour_low_shown_score", [](RecognizerOptions& r) { r.contour_low_shown_score = -0.1; }},
+      {"ladder_search_m", [](RecognizerOptions& r) { r.ladder_search_m = -0.01; }},
+      {"ladder_step_m", [](RecognizerOptions& r) { r.ladder_search_m = 0.012, r.ladder_step_m = 0; }},
+      {"ladder_margin", [](RecognizerOptions& r) { r.ladder_margin = -1; }},
+      {"ladder_score_gain", [](RecognizerOptions& r) { r.ladder_score_gain = 2; }},
   };
   for (const auto& [field, set] : contour_limits) {
     o = RecognizerOptions();
@@ -1063,6 +1068,53 @@ TEST(RecognizerTest, ACornerClaimedByOneModelIsStillFittedWithTheOthers) {
 // the wall's top, or over the region between two walls it bridges; its centre beyond the wall's edge
 // (a pose off along the camera ray, laid on the edge of the frame), it topples; a block above the
 // wall's top by more than the tolerance does not rest on it at all.
+// The ladder check (RecognizerOptions::ladder_search_m): a plate recognized on the table 7 mm off
+// along one side (about 9 px: beyond the polish's 3 px reach, which the sides along the move cannot
+// pull back) is moved back to where its whole outline is supported; with the check off it stays off.
+TEST(ModelEditorTest, TheLadderCheckMovesARestingBlockBackOntoItsOutline) {
+  const Camera camera = SyntheticCamera();
+  const Model plate{"plate", Eigen::Vector3d(0.06, 0.06, 0.015)};
+  const geometry::Pose3 truth = OnTable(plate.box_size_m, 0.01, 0.02, 0.3);
+  const cv::Mat image = RenderBoxes(camera, {{plate.box_size_m, truth}}, 7);
+  RecognizerOptions options;
+  const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+  ModelLibrary models;
+  models.models.push_back(plate);
+  Recognition off;
+  off.model = plate.name;
+  off.score = 0.9;
+  off.world_T_object = truth;
+  off.world_T_object.translation += 0.007 * (truth.rotation * Eigen::Vector3d::UnitX());
+  off.raw_world_T_object = off.world_T_object;
+  for (const double search_m : {0.0, 0.012}) {
+    options.ladder_search_m = search_m;
+    std::vector<Recognition> objects = {off};
+    internal::ApplyModelEditorRules(models, camera, detection, internal::FixedWorld{}, options, &objects);
+    const Recognition& r = objects[0];
+    const double error_m = (r.world_T_object.translation - truth.translation).norm();
+    bool reported = false;
+    for (const std::string& a : r.adjustments)
+      reported = reported || a.find("along its side") != std::string::npos;
+    if (search_m == 0) {
+      EXPECT_GT(error_m, 0.005);
+      EXPECT_FALSE(reported);
+    } else {
+      EXPECT_LT(error_m, 0.0005);
+      EXPECT_LT(SymmetricRotationAngle(plate, r.world_T_object, truth), 0.2 * M_PI / 180);
+      EXPECT_TRUE(reported);
+    }
+  }
+  // A block already where its outline is: left there.
+  options.ladder_search_m = 0.012;
+  Recognition right = off;
+  right.world_T_object = right.raw_world_T_object = truth;
+  std::vector<Recognition> objects = {right};
+  internal::ApplyModelEditorRules(models, camera, detection, internal::FixedWorld{}, options, &objects);
+  EXPECT_LT((objects[0].world_T_object.translation - truth.translation).norm(), 0.0005);
+  for (const std::string& a : objects[0].adjustments)
+    EXPECT_EQ(a.find("along its side"), std::string::npos) << a;
+}
+
 TEST(SelectionTest, AnOffTableRecognitionStandsOnlyWithItsCentreOverItsSupports) {
   auto box = [](double x0, double y0, double z0, double x1, double y1, double z1) {
     return geometry::Aabb{Eigen::Vector3d(x0, y0, z0), Eigen::Vector3d(x1, y1, z1)};

@@ -6,7 +6,9 @@
 // own least-squares fit of model edges to image lines). Figures per data set: recall per
 // visible-fraction bin and of the unoccluded blocks (vision::kUnoccludedFraction), false positives
 // per image, position error across / along the line of sight, symmetry-aware rotation error,
-// reprojection RMS and time per image (thread CPU time, one OpenCV thread). --render-seeds: the
+// reprojection RMS (the fit's residual, as each method reports it), the pose's projection error
+// against the truth (vision::SymmetricProjectionRms: every method's, LINE-MOD's raw poses too) and
+// time per image (thread CPU time, one OpenCV thread). --render-seeds: the
 // renders of each seed (60 scenes; default 7), several pooled into one data set; --no-peer: teachsim
 // alone (LINE-MOD's templates not even made).
 // Environment: TEACHSIM_HOME (repository), TEACHSIM_SHARED (../shared), TEACHSIM_CACHE_DIR
@@ -14,8 +16,10 @@
 // TEACHSIM_RECOGNIZE_DUMP=DIR draws the images with a miss or a false detection, with the detected
 // segments and Canny edges (see DumpCase; with TEACHSIM_RECOGNIZE_DUMP_ALL=1 every image);
 // TEACHSIM_RECOGNIZE_DEBUG=1 prints every LINE-MOD match beside the truth (and, for the recognizer,
-// each image's stage counts and times, each object it missed with the stage that lost it and the
-// evidence at the true pose, and each false detection); TEACHSIM_RECOGNIZE_NO_PEER=1 leaves LINE-MOD
+// each image's stage counts and times, each object it found with its errors — each found block
+// drawn over 2 px off its truth also with its raw pose's error, the editor's adjustments and the
+// evidence at the raw, edited and true poses —, each object it missed with the stage that lost it and
+// the evidence at the true pose, and each false detection); TEACHSIM_RECOGNIZE_NO_PEER=1 leaves LINE-MOD
 // out (as --no-peer); TEACHSIM_RECOGNIZE_RENDER_SEED=N or A-B is the default of --render-seeds;
 // TEACHSIM_RECOGNIZE_FEATURES=FILE appends the evidence of every fitted hypothesis with its truth
 // label (see AppendFeatures; tools/fit_evidence_weights.py fits the evidence score to it);
@@ -24,8 +28,9 @@
 // contrast-X, score-X, evidence-X, accept-X, below-MM, canny-X (both thresholds times X), cannylow-X,
 // cannyhigh-X, eps-X, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX,
 // stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX, alternatives-N (0: no other models
-// fitted at the candidates' places), permodel-N (places per model among them), skip-any-claim (a
-// corner's support hypotheses skipped once a candidate of any model matched its segments),
+// fitted at the candidates' places), ladder-MM (the model editor's ladder check's reach, mm; 0: off),
+// laddermargin-X, ladderscore-X, laddercoverage-X, permodel-N (places per model among them), skip-any-claim
+// (a corner's support hypotheses skipped once a candidate of any model matched its segments),
 // matched-whole-edges (the matched share of the whole visible edges, the parts outside the image
 // included) and matchedinimage-X (the share of the outline inside the image from which the matched
 // share is of that part only), no-rescue and rescue-X (poses short of the matched share turned down
@@ -549,6 +554,10 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"contourlowshown", [o](double v) { o->contour_low_shown_share = v; }},
       {"contourlowscore", [o](double v) { o->contour_low_shown_score = v; }},
       {"rescue", [o](double v) { o->matched_share_rescue_score = v; }},
+      {"ladder", [o](double v) { o->ladder_search_m = v / 1000; }},
+      {"laddermargin", [o](double v) { o->ladder_margin = v; }},
+      {"ladderscore", [o](double v) { o->ladder_score_gain = v; }},
+      {"laddercoverage", [o](double v) { o->ladder_max_coverage = v; }},
 
       {"refitrms", [o](double v) { o->refit_max_rms_px = v; }},
       {"refitcoverage", [o](double v) { o->refit_min_coverage = v; }},
@@ -574,7 +583,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
            "stepgrey-X, stepoffset-PX, alternatives-N, permodel-N, matchedinimage-X, refitrms-PX, "
            "refitcoverage-X, refitscore-X, contourlen-PX, contourcover-X, contourstep-GREY, contourshown-X, "
-           "contourlowshown-X, contourlowscore-X, "
+           "contourlowshown-X, contourlowscore-X, ladder-MM, laddermargin-X, ladderscore-X, "
+           "laddercoverage-X, "
            "refitinimage-X, "
            "balance-N, ownlead-N, rankshare-X, inimagelead-X, tieshare-X, ownbalance-N, centreslack-MM)";
   }
@@ -779,7 +789,8 @@ int Run(const BenchArgs& args) {
         const vision::LineDetection detection =
             vision::DetectLinesAndEdges(c.image, *camera, recognizer->options());
         const std::vector<vision::Group> groups = vision::FindGroups(detection.lines, recognizer->options());
-        auto evaluation = vision::EvaluateImage(c.truth, found[0], truth->model_sizes_m, eye, match);
+        auto evaluation =
+            vision::EvaluateImage(c.truth, found[0], truth->model_sizes_m, eye, match, &*camera);
         if (evaluation.ok() && std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr) {
           // The tilt of a pose: its most vertical axis against the world's vertical, deg.
           auto tilt_deg = [](const Eigen::Quaterniond& q) {
@@ -832,14 +843,47 @@ int Run(const BenchArgs& args) {
                 stderr,
                 "%s found %s %.2f: rotation %.2f deg (raw %.2f; tilt %.2f, truth's %.2f), across %.2f mm, "
                 "along %.2f "
-                "mm, rms %.2f px, score %.3f, matched %.2f\n",
+                "mm, rms %.2f px, score %.3f, matched %.2f, off truth %.2f px\n",
                 c.name.c_str(), t.model.c_str(), t.visible_fraction, o.rotation_error_rad * 180 / kPi,
                 vision::SymmetricRotationError(t.world_T_object.rotation, r.raw_world_T_object.rotation,
                                                vision::BoxSymmetries(truth->model_sizes_m.at(t.model))) *
                     180 / kPi,
                 tilt_deg(r.world_T_object.rotation), tilt_deg(t.world_T_object.rotation),
                 o.position_error.across_m * 1000, o.position_error.along_m * 1000, r.reprojection_rms_px,
-                r.score, r.matched_edge_fraction);
+                r.score, r.matched_edge_fraction, o.truth_projection_rms_px);
+            // The editor's ladder check, when it moved the block.
+            for (const std::string& a : r.adjustments) {
+              if (a.find("along its side") != std::string::npos)
+                std::fprintf(stderr, "    ladder: %s\n", a.c_str());
+            }
+            // A found block drawn well off its truth: its raw pose's figure, what the editor did, and
+            // the evidence at the raw, edited and true poses.
+            if (o.truth_projection_rms_px > 2) {
+              std::fprintf(
+                  stderr, "    raw pose off truth %.2f px\n",
+                  vision::SymmetricProjectionRms(*camera, truth->model_sizes_m.at(t.model), t.world_T_object,
+                                                 r.raw_world_T_object,
+                                                 vision::BoxSymmetries(truth->model_sizes_m.at(t.model))));
+              for (const std::string& a : r.adjustments) std::fprintf(stderr, "    editor: %s\n", a.c_str());
+              const vision::Model& model =
+                  *std::find_if(library.models.begin(), library.models.end(),
+                                [&](const vision::Model& m) { return m.name == t.model; });
+              auto score_at = [&](const geometry::Pose3& world_T_object) {
+                const vision::PoseEvidence e =
+                    vision::EvaluatePose(model, *camera, camera->camera_T_world() * world_T_object, detection,
+                                         recognizer->options());
+                std::fprintf(stderr, "score %.3f support %.2f coverage %.2f step %.0f px supported %.0f px",
+                             vision::EvidenceScore(e), e.support_fraction, e.coverage, e.step_supported_px,
+                             e.supported_px);
+              };
+              std::fprintf(stderr, "    evidence at the raw pose: ");
+              score_at(r.raw_world_T_object);
+              std::fprintf(stderr, "; at the edited pose: ");
+              score_at(r.world_T_object);
+              std::fprintf(stderr, "; at the truth: ");
+              score_at(t.world_T_object);
+              std::fprintf(stderr, "\n");
+            }
           }
         }
         if (const char* features = std::getenv("TEACHSIM_RECOGNIZE_FEATURES"); features != nullptr) {
@@ -976,7 +1020,8 @@ int Run(const BenchArgs& args) {
           ++result.errors[m];
           continue;
         }
-        auto evaluation = vision::EvaluateImage(c.truth, found[m], truth->model_sizes_m, eye, match);
+        auto evaluation =
+            vision::EvaluateImage(c.truth, found[m], truth->model_sizes_m, eye, match, &*camera);
         if (!evaluation.ok()) {
           std::fprintf(stderr, "teachsim: error: %s: %s\n", c.name.c_str(), evaluation.status().message().c_str());
           return 1;
@@ -1129,7 +1174,8 @@ int Run(const BenchArgs& args) {
              {"position_error_across_mm", "across mm (median/p90)"},
              {"position_error_along_mm", "along mm (median/p90)"},
              {"rotation_error_deg", "rotation deg (median/p90)"},
-             {"reprojection_rms_px", "reprojection px (median/p90)"}}) {
+             {"reprojection_rms_px", "reprojection px (median/p90)"},
+             {"truth_projection_rms_px", "off truth px (median/p90)"}}) {
       row(label, [&, k = key](const json::Json& j) {
         return number(j[k]["median"], "%.2f") + " / " + number(j[k]["p90"], "%.2f");
       });

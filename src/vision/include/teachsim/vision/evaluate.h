@@ -21,6 +21,7 @@
 #include "teachsim/base/status.h"
 #include "teachsim/geometry/pose.h"
 #include "teachsim/scene/scene.h"
+#include "teachsim/vision/camera.h"
 
 namespace teachsim::vision {
 
@@ -41,6 +42,16 @@ struct PositionError {
 };
 PositionError SplitPositionError(const Eigen::Vector3d& truth_in_world, const Eigen::Vector3d& estimate_in_world,
                                  const Eigen::Vector3d& camera_centre_in_world);
+
+// How far off an estimated pose looks in the image: the RMS over the box's 8 corners of the distance
+// (px) between each corner's projection at the estimate and at the truth, through the camera's lens,
+// the least over the symmetry group (a symmetric box's corners are matched as the symmetry that
+// fits best maps them). This is the pose's own reprojection error against the truth, as BOP's
+// MSPD but RMS rather than max; unlike a fit's residual it does not depend on where edges were
+// found. NaN when a corner is not in front of the camera at either pose.
+double SymmetricProjectionRms(const Camera& camera, const Eigen::Vector3d& size_m,
+                              const geometry::Pose3& world_T_truth, const geometry::Pose3& world_T_estimate,
+                              const std::vector<Eigen::Quaterniond>& symmetries);
 
 // --- Truth ---------------------------------------------------------------------------------------
 
@@ -115,6 +126,8 @@ struct ObjectOutcome {
   double rotation_error_rad = 0;  // of the match
   PositionError position_error;   // of the match
   double reprojection_rms_px = std::numeric_limits<double>::quiet_NaN();  // the match's own figure
+  // SymmetricProjectionRms of the match against its truth; NaN without a camera.
+  double truth_projection_rms_px = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct ImageEvaluation {
@@ -127,11 +140,12 @@ struct ImageEvaluation {
 // object of its model within the thresholds with the smallest normalised error (the sum of each
 // error over its threshold); detections left over, duplicates included, are false positives.
 // Fails when a truth object's model has no size in `model_sizes_m` (its symmetries are unknown).
-[[nodiscard]] Result<ImageEvaluation> EvaluateImage(const std::vector<TruthObject>& truth,
-                                                    const std::vector<Detection>& detections,
-                                                    const std::map<std::string, Eigen::Vector3d>& model_sizes_m,
-                                                    const Eigen::Vector3d& camera_centre_in_world,
-                                                    const MatchOptions& options);
+// With `camera` (the image's), each match's truth_projection_rms_px too.
+[[nodiscard]] Result<ImageEvaluation> EvaluateImage(
+    const std::vector<TruthObject>& truth, const std::vector<Detection>& detections,
+    const std::map<std::string, Eigen::Vector3d>& model_sizes_m,
+    const Eigen::Vector3d& camera_centre_in_world, const MatchOptions& options,
+    const Camera* camera = nullptr);
 
 // Where each false positive of `evaluation` stands: the truth object (scored or not) whose box
 // holds the detection's centre, or whose centre the detection's box holds, each box grown by
@@ -193,6 +207,7 @@ struct Summary {
   int false_positives = 0;
   int within_goals = 0;  // found objects whose pose meets every PoseGoals figure
   Stats rotation_deg, across_mm, along_mm, reprojection_rms_px, time_ms;
+  Stats truth_projection_rms_px;               // of the found objects that have one (ObjectOutcome)
   int over_time_goal = 0;                      // images that took longer than kTimeGoalMs
   std::map<std::string, Stats> stage_time_ms;  // per stage, over the images that gave it
   std::optional<ImageTime> slowest;            // the image that took longest (none without images)
@@ -215,7 +230,7 @@ class SummaryBuilder {
  private:
   PoseGoals goals_;
   Summary counts_;
-  std::vector<double> rotation_deg_, across_mm_, along_mm_, rms_px_, time_ms_;
+  std::vector<double> rotation_deg_, across_mm_, along_mm_, rms_px_, truth_projection_px_, time_ms_;
   std::map<std::string, std::vector<double>> stage_ms_;
 };
 

@@ -280,6 +280,20 @@ struct RecognizerOptions {
   // --- model editor (item 6, §4.3)
   double table_snap_distance_m = 0.01;       // an object whose lowest point is this close to a support rests on it, m
   double table_snap_max_tilt_deg = 6;        // ... when one of its faces is this close to horizontal, deg
+  // The ladder check (ladder_search_m > 0; off by default): a block resting on the table, moved along
+  // either of its sides on the table by ladder_step_m up to ladder_search_m, where a parallel line (a
+  // shadow's edge, a grain line, its own thickness) lines up with its outline; the move whose outline
+  // shows the most supported step edges (NetSupportPx), fitted there (PolishPose), is taken when it
+  // still shows ladder_margin more of them and its evidence score (EvidenceScore) is
+  // ladder_score_gain higher. Looked for only when the block's outline is short of edges: coverage
+  // (PoseEvidence) under ladder_max_coverage. Measured at 12 mm (docs/benchmarks.md, session 43):
+  // render seeds 7-38 (chosen on), found blocks drawn over 5 px off their truth 33 -> 25; seeds 39-71
+  // (held out) 27 -> 28, 4 of 14 moves there made the pose worse; +0.8 ms per image. Left off.
+  double ladder_search_m = 0;
+  double ladder_step_m = 0.002;
+  double ladder_margin = 0.1;
+  double ladder_score_gain = 0.01;
+  double ladder_max_coverage = 0.8;
   [[nodiscard]] Status Validate() const;
   // The least share of a pose's outline in view that any judgement beside an occluding contour
   // takes: contour_low_shown_share, or contour_min_shown_share when that is smaller (the rule off).
