@@ -92,7 +92,8 @@ inline bool HiddenByAny(const std::vector<Occluder>& occluders, const Eigen::Vec
 
 // 6. The model editor's rules (paper §4.3), each adjustment reported in the recognition's
 // adjustments: a recognition near the table is levelled and rested on it along the camera ray, then
-// fitted again there to the image's edge points; interpenetrating recognitions are separated by
+// fitted again there to the image's edge points (and, with RecognizerOptions::ladder_search_m, moved
+// along a side where its outline shows more edges); interpenetrating recognitions are separated by
 // the smallest moves, and pushed out of fixed objects.
 void ApplyModelEditorRules(const ModelLibrary& models, const Camera& camera, const LineDetection& detection,
                            const FixedWorld& fixed, const RecognizerOptions& options,
