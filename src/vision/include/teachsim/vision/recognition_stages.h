@@ -533,8 +533,8 @@ PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geomet
                           const LineDetection& detection, const RecognizerOptions& options,
                           const FixedEdgeMap* fixed = nullptr);
 // The evidence along the outline alone (EvaluatePose's sample-by-sample fields: support, coverage,
-// step-supported length, polarity, ...), without matching lines: a tenth of the time, for ranking many
-// nearby poses by NetSupportPx.
+// step-supported length, polarity, ...), without matching lines (the matched share and the residuals
+// stay 0): what NetSupportPx needs, for ranking many nearby poses by it.
 PoseEvidence EvaluateOutline(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
                              const LineDetection& detection, const RecognizerOptions& options);
 // How likely the evidence is of a true pose (within 3 px of a real block of the model), 0..1: a
