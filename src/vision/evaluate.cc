@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "teachsim/vision/recognition_stages.h"
 
 namespace teachsim::vision {
 namespace {
@@ -146,12 +147,8 @@ double SymmetricProjectionRms(const Camera& camera, const Eigen::Vector3d& size_
                               const geometry::Pose3& world_T_truth, const geometry::Pose3& world_T_estimate,
                               const std::vector<Eigen::Quaterniond>& symmetries) {
   std::array<Eigen::Vector2d, 8> estimate_px;
-  std::array<Eigen::Vector3d, 8> corner;
   for (int i = 0; i < 8; ++i) {
-    corner[static_cast<std::size_t>(i)] = 0.5 * Eigen::Vector3d((i & 1) != 0 ? size_m.x() : -size_m.x(),
-                                                                (i & 2) != 0 ? size_m.y() : -size_m.y(),
-                                                                (i & 4) != 0 ? size_m.z() : -size_m.z());
-    const auto p = camera.Project(world_T_estimate * corner[static_cast<std::size_t>(i)]);
+    const auto p = camera.Project(world_T_estimate * BoxVertex(size_m, i));
     if (!p) return kNaN;
     estimate_px[static_cast<std::size_t>(i)] = *p;
   }
@@ -160,7 +157,7 @@ double SymmetricProjectionRms(const Camera& camera, const Eigen::Vector3d& size_
     // The truth's pose under symmetry s: its corner s * c stands where the estimate's corner c does.
     double sum = 0;
     for (int i = 0; i < 8; ++i) {
-      const auto p = camera.Project(world_T_truth * (s * corner[static_cast<std::size_t>(i)]));
+      const auto p = camera.Project(world_T_truth * (s * BoxVertex(size_m, i)));
       if (!p) return kNaN;
       sum += (*p - estimate_px[static_cast<std::size_t>(i)]).squaredNorm();
     }

@@ -239,11 +239,7 @@ struct BarOnTheTable {
 // view; they come after all those in full view, best first, and only where these leave room under
 // max_support_hypotheses.
 TEST(ContoursTest, PlacementsBehindAContourFillOnlyTheRoomThoseInViewLeave) {
-  const BarOnTheTable scene;
-  const Camera& camera = scene.camera;
-  const Model& bar = scene.bar;
-  const ModelLibrary& library = scene.library;
-  const geometry::Pose3& bar_pose = scene.bar_pose;
+  const auto& [camera, bar, library, bar_pose] = BarOnTheTable();
   double lo = 1e9, hi = -1e9;
   for (int v = 0; v < 8; ++v) {
     const double x = camera.Project(bar_pose * BoxVertex(bar.box_size_m, v))->x();
@@ -304,11 +300,7 @@ TEST(ContoursTest, PlacementsBehindAContourFillOnlyTheRoomThoseInViewLeave) {
 // it stands on the outline beside the flanks' strip only with support_pole_ends and
 // contour_pole_ends (its whole outline shows too little support).
 TEST(ContoursTest, APlacementBesideAPoleWhoseTopIsInFrontNeedsSupportPoleEnds) {
-  const BarOnTheTable scene;
-  const Camera& camera = scene.camera;
-  const Model& bar = scene.bar;
-  const ModelLibrary& library = scene.library;
-  const geometry::Pose3& bar_pose = scene.bar_pose;
+  const auto& [camera, bar, library, bar_pose] = BarOnTheTable();
   const geometry::Pose3 camera_T_bar = camera.camera_T_world() * bar_pose;
   std::array<Eigen::Vector2d, 8> px;
   for (int v = 0; v < 8; ++v) {
