@@ -421,6 +421,16 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
 
   for (size_t c = 0; c < corners.size(); ++c) {
     const ImageCorner& corner = corners[c];
+    if (options.support_corner_ridge_share > 0 &&
+        static_cast<int>(corners.size()) >= options.support_corner_ridge_min_corners) {
+      bool ridge = false;
+      for (int k = 0; k < 2 && !ridge; ++k) {
+        ridge = LineRidgeShare(ImageLine{corner.point, corner.arm_end[static_cast<size_t>(k)]}, camera,
+                               detection.edge_map,
+                               options.support_corner_ridge_grey) >= options.support_corner_ridge_share;
+      }
+      if (ridge) continue;
+    }
     int vertical[2];
     for (int k = 0; k < 2; ++k) vertical[k] = VerticalArm(K, camera_T_world, corner.point, corner.arm_end[static_cast<size_t>(k)], vertical_tol);
     if (!contours.empty()) {

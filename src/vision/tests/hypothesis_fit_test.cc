@@ -277,6 +277,100 @@ TEST(HypothesisFitTest, SupportHypothesesKeepOnePosePerPlaceUpToSymmetry) {
   }
 }
 
+// A thin dark line (wood grain) drawn on a cube's top face from near one of its top corners: its
+// image line is a thin line (LineRidgeShare), the cube's edges are not, and with the corner filter
+// on no support-plane hypothesis comes from a corner with the grain as an arm, while the cube is
+// still proposed first. By default the filter acts only in cluttered images (150 corners or more).
+TEST(HypothesisFitTest, CornersWithAGrainLineAsAnArmProposeNothing) {
+  const Camera camera = SyntheticCamera();
+  const Model cube{"cube45", Eigen::Vector3d(0.045, 0.045, 0.045)};
+  const ModelLibrary library{{cube}};
+  const geometry::Pose3 truth = OnTable(cube.box_size_m, 0.0, 0.01, 0.35);
+  cv::Mat image = RenderBox(camera, cube.box_size_m, truth);
+  // The grain: from 4 px inside the top face's corner nearest the camera, towards and past the
+  // face's middle.
+  const geometry::Pose3 camera_T_object = camera.camera_T_world() * truth;
+  int nearest = 4;
+  for (int v = 5; v < 8; ++v) {  // the top vertices (+z)
+    if ((camera_T_object * BoxVertex(cube.box_size_m, v)).z() <
+        (camera_T_object * BoxVertex(cube.box_size_m, nearest)).z()) {
+      nearest = v;
+    }
+  }
+  const Eigen::Vector2d vertex = *camera.Project(truth * BoxVertex(cube.box_size_m, nearest));
+  const Eigen::Vector2d middle = *camera.Project(truth * Eigen::Vector3d(0, 0, 0.5 * cube.box_size_m.z()));
+  const Eigen::Vector2d along = (middle - vertex).normalized();
+  const Eigen::Vector2d grain_a = vertex + 4 * along, grain_b = middle + 0.6 * (middle - vertex);
+  auto fixed_point = [](const Eigen::Vector2d& p) {  // 4 bits of sub-pixel
+    return cv::Point(static_cast<int>(std::lround(p.x() * 16)), static_cast<int>(std::lround(p.y() * 16)));
+  };
+  cv::line(image, fixed_point(grain_a), fixed_point(grain_b), cv::Scalar(60), 1, cv::LINE_AA, 4);
+  RecognizerOptions options;
+  ASSERT_GT(options.support_corner_ridge_share, 0) << "the filter is on by default";
+  const int clutter = options.support_corner_ridge_min_corners;
+  options.support_corner_ridge_min_corners = 0;  // in every image
+  const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+  // The grain's image line (a flank of it), and the lines along the cube's edges.
+  const Eigen::Vector2d grain_normal(-along.y(), along.x());
+  int grain = -1;
+  for (size_t i = 0; i < detection.lines.size(); ++i) {
+    const ImageLine& l = detection.lines[i];
+    if (l.Length() > 20 && std::abs(grain_normal.dot(l.a - grain_a)) < 2.5 &&
+        std::abs(grain_normal.dot(l.b - grain_a)) < 2.5) {
+      grain = static_cast<int>(i);
+    }
+  }
+  ASSERT_GE(grain, 0) << "the grain line was not detected";
+  EXPECT_GE(LineRidgeShare(detection.lines[static_cast<size_t>(grain)], camera, detection.edge_map,
+                           options.support_corner_ridge_grey),
+            0.8);
+  int edges_checked = 0;
+  for (const ImageLine& edge : EdgeLines(cube, camera.K(), camera_T_object)) {
+    const Eigen::Vector2d d = (edge.b - edge.a).normalized(), n(-d.y(), d.x());
+    for (const ImageLine& l : detection.lines) {
+      if (l.Length() < 20 || std::abs(n.dot(l.a - edge.a)) > 1.5 || std::abs(n.dot(l.b - edge.a)) > 1.5)
+        continue;
+      EXPECT_LE(LineRidgeShare(l, camera, detection.edge_map, options.support_corner_ridge_grey), 0.1);
+      ++edges_checked;
+    }
+  }
+  EXPECT_GE(edges_checked, 6);
+  // The corners with the grain as an arm propose nothing; the cube's own corners still do.
+  const std::vector<ImageCorner> corners = FindCorners(detection.lines, options);
+  const int grain_edge = JoinCollinearLines(detection.lines).representative[static_cast<size_t>(grain)];
+  std::vector<bool> grain_corner(corners.size());
+  for (size_t c = 0; c < corners.size(); ++c) {
+    grain_corner[c] = corners[c].segments[0] == grain_edge || corners[c].segments[1] == grain_edge;
+  }
+  ASSERT_NE(std::count(grain_corner.begin(), grain_corner.end(), true), 0)
+      << "no corner has the grain as an arm";
+  const std::vector<SupportHypothesis> filtered =
+      SupportHypotheses(library, camera, detection, corners, {SupportPlane{}}, options);
+  ASSERT_FALSE(filtered.empty());
+  EXPECT_LT((filtered.front().world_T_object.translation - truth.translation).norm(), 0.002);
+  for (const SupportHypothesis& h : filtered) EXPECT_FALSE(grain_corner[static_cast<size_t>(h.corner)]);
+  // Given only the grain's corners and no support threshold, they propose poses without the filter
+  // (a grain line and the cube's vertical edge make a top corner) and none with it.
+  std::vector<ImageCorner> grain_corners;
+  for (size_t c = 0; c < corners.size(); ++c) {
+    if (grain_corner[c]) grain_corners.push_back(corners[c]);
+  }
+  RecognizerOptions any_support = options;
+  any_support.support_min_score = 0;
+  EXPECT_TRUE(
+      SupportHypotheses(library, camera, detection, grain_corners, {SupportPlane{}}, any_support).empty());
+  any_support.support_corner_ridge_min_corners = static_cast<int>(grain_corners.size()) + 1;  // not cluttered
+  EXPECT_FALSE(
+      SupportHypotheses(library, camera, detection, grain_corners, {SupportPlane{}}, any_support).empty());
+  any_support.support_corner_ridge_min_corners = static_cast<int>(grain_corners.size());
+  EXPECT_TRUE(
+      SupportHypotheses(library, camera, detection, grain_corners, {SupportPlane{}}, any_support).empty());
+  any_support.support_corner_ridge_share = 0;  // off
+  EXPECT_FALSE(
+      SupportHypotheses(library, camera, detection, grain_corners, {SupportPlane{}}, any_support).empty());
+  EXPECT_GT(clutter, static_cast<int>(corners.size())) << "by default this image is not cluttered";
+}
+
 // MatchEdges passes over the lines outside the predicted edges' bounding box (grown by the match
 // distance) without testing them: the matches are those of testing every line against every edge
 // by the rule (nearly parallel, both ends within the distance, overlapping by half its length; the

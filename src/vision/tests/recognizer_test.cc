@@ -555,6 +555,10 @@ TEST(OptionsTest, ValidateNamesTheField) {
       {"ladder_step_m", [](RecognizerOptions& r) { r.ladder_search_m = 0.012, r.ladder_step_m = 0; }},
       {"ladder_margin", [](RecognizerOptions& r) { r.ladder_margin = -1; }},
       {"ladder_score_gain", [](RecognizerOptions& r) { r.ladder_score_gain = 2; }},
+      {"support_corner_ridge_share", [](RecognizerOptions& r) { r.support_corner_ridge_share = 1.5; }},
+      {"support_corner_ridge_grey", [](RecognizerOptions& r) { r.support_corner_ridge_grey = 0; }},
+      {"support_corner_ridge_min_corners",
+       [](RecognizerOptions& r) { r.support_corner_ridge_min_corners = -1; }},
   };
   for (const auto& [field, set] : contour_limits) {
     o = RecognizerOptions();

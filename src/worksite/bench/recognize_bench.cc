@@ -26,7 +26,8 @@
 // TEACHSIM_RECOGNIZE_ABLATION runs the recognizer with options changed, several separated by
 // commas (see ApplyAblation: no-support, plane-only, no-polish, no-refit, rules-only, index-N, support-N,
 // contrast-X, score-X, evidence-X, accept-X, below-MM, canny-X (both thresholds times X), cannylow-X,
-// cannyhigh-X, eps-X, neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX,
+// cannyhigh-X, eps-X, neighbours-N, queries-N, matched-X, supportmin-X, cornerridge-X (0: the thin-line
+// corner filter off), cornerridgegrey-GREY, cornerridgecorners-N, seglen-PX, junction-PX,
 // stepshare-X (0: the step rule off), stepgrey-X, stepoffset-PX, alternatives-N (0: no other models
 // fitted at the candidates' places), ladder-MM (the model editor's ladder check's reach, mm; 0: off),
 // laddermargin-X, ladderscore-X, laddercoverage-X, permodel-N (places per model among them), skip-any-claim
@@ -534,6 +535,9 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"seglen", [o](double v) { o->min_segment_length_px = v; }},
       {"junction", [o](double v) { o->junction_gap_px = v; }},
       {"supportmin", [o](double v) { o->support_min_score = v; }},
+      {"cornerridge", [o](double v) { o->support_corner_ridge_share = v; }},
+      {"cornerridgegrey", [o](double v) { o->support_corner_ridge_grey = v; }},
+      {"cornerridgecorners", [o](double v) { o->support_corner_ridge_min_corners = static_cast<int>(v); }},
       {"eps", [o](double v) { o->index_search_eps = v; }},
       {"neighbours", [o](double v) { o->neighbours = static_cast<int>(v); }},
       {"cannylow", [o](double v) { o->canny_low *= v; }},
@@ -580,7 +584,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "support-N, "
            "contrast-X, "
            "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, eps-X, "
-           "neighbours-N, queries-N, matched-X, supportmin-X, seglen-PX, junction-PX, stepshare-X, "
+           "neighbours-N, queries-N, matched-X, supportmin-X, cornerridge-X, cornerridgegrey-GREY, "
+           "cornerridgecorners-N, seglen-PX, junction-PX, stepshare-X, "
            "stepgrey-X, stepoffset-PX, alternatives-N, permodel-N, matchedinimage-X, refitrms-PX, "
            "refitcoverage-X, refitscore-X, contourlen-PX, contourcover-X, contourstep-GREY, contourshown-X, "
            "contourlowshown-X, contourlowscore-X, ladder-MM, laddermargin-X, ladderscore-X, "

@@ -79,6 +79,21 @@ struct RecognizerOptions {
   // >= 0.7 visible 4479 -> 4500 of 4738, 0.4-0.7 103 -> 110 of 372, false 68 -> 73 in 1500 images,
   // +0.9 ms per image (held out 19-31: +10, +4, +3 false; docs/benchmarks.md).
   int max_support_hypotheses = 80;
+  // In a cluttered image (support_corner_ridge_min_corners image corners or more), an image corner
+  // one of whose arms is a thin line (LineRidgeShare(arm, support_corner_ridge_grey) >=
+  // support_corner_ridge_share; 0: off) proposes nothing: wood grain meeting a block's edge, or two
+  // grain lines, make corners that are no block's vertex, and their placements took the stage's time
+  // and, past the cap above, the fitted hypotheses' places. Render seeds 7-71 (3900 images), on
+  // against off: found >= 0.7 visible 11602 -> 11579 of 12181, 0.4-0.7 379 -> 394 of 981, < 0.4
+  // 29 -> 34, false 176 -> 171; the mean time per image 23.1 -> 19.3 ms, the slowest of 360 47.4 ->
+  // 42.0 ms (seeds 7-12, one process); the POV-Ray dev set (at most 114 corners) unchanged. Chosen on
+  // seeds 7-38; held out 39-71: found -7 / +7 / +2, false -4. A block's face seen edge-on is a thin
+  // strip too: the blocks lost are mostly slabs and plates (docs/benchmarks.md, session 44).
+  double support_corner_ridge_share = 0.5;
+  double support_corner_ridge_grey =
+      8;  // grey levels (smoothed image) a thin line stands out from both sides
+  int support_corner_ridge_min_corners =
+      150;                                   // the filter's clutter: the dev set's images have 39-114 corners
   double support_min_score = 0.5;            // edge support of a support hypothesis before fitting, 0..1
   double support_perpendicular_tol_deg = 8;  // two horizontal arms on the plane must be this close to 90 deg
   double support_vertical_tol_deg = 4;       // an arm this close to the image vertical may be the vertical edge
