@@ -286,6 +286,46 @@ std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::V
   return std::nullopt;
 }
 
+double LineRidgeShare(const ImageLine& line, const Camera& camera, const EdgeMap& edge_map, double min_grey) {
+  const Intrinsics& k = camera.intrinsics();
+  auto to_image = [&](const Eigen::Vector2d& undistorted) {
+    return camera.NormalizedToPixel(
+        Eigen::Vector2d((undistorted.x() - k.cx) / k.fx, (undistorted.y() - k.cy) / k.fy));
+  };
+  const double length = line.Length();
+  if (!(length > 1)) return 0;
+  const Eigen::Vector2d along = (line.b - line.a) / length;
+  // The line found along a thin line is one of its flanks (Canny marks both): its darkest (or
+  // brightest) grey within kCorePx, and the grey kSidePx beyond that point on either side.
+  constexpr double kSpacingPx = 3, kEndShare = 0.1, kCorePx = 2, kSidePx = 3;
+  const int n = std::max(3, static_cast<int>((1 - 2 * kEndShare) * length / kSpacingPx));
+  int counted = 0, ridges = 0;
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector2d u = line.a + (kEndShare + (1 - 2 * kEndShare) * (i + 0.5) / n) * (line.b - line.a);
+    const Eigen::Vector2d c = to_image(u);
+    if (!camera.InImage(c)) continue;
+    const Eigen::Vector2d d = (to_image(u + along) - c).normalized(), normal(-d.y(), d.x());
+    ++counted;
+    float darkest = 256, brightest = -1;
+    double dark_at = 0, bright_at = 0;
+    for (double o = -kCorePx; o <= kCorePx + 1e-9; o += 0.5) {
+      const float g = internal::SampleGrey(edge_map.smoothed, c + o * normal);
+      if (g < darkest) darkest = g, dark_at = o;
+      if (g > brightest) brightest = g, bright_at = o;
+    }
+    // Both sides at least min_grey brighter than a dark core (or darker than a bright one), and
+    // within min_grey of each other.
+    auto thin = [&](double at, float core, bool dark) {
+      const float left = internal::SampleGrey(edge_map.smoothed, c + (at - kSidePx) * normal);
+      const float right = internal::SampleGrey(edge_map.smoothed, c + (at + kSidePx) * normal);
+      const float stands_out = dark ? std::min(left, right) - core : core - std::max(left, right);
+      return stands_out >= min_grey && std::abs(left - right) < min_grey;
+    };
+    ridges += thin(dark_at, darkest, true) || thin(bright_at, brightest, false);
+  }
+  return counted > 0 ? static_cast<double>(ridges) / counted : 0;
+}
+
 int EdgeSign(const EdgePixel& edge, const Eigen::Vector2d& normal) {
   return edge.gx * static_cast<float>(normal.x()) + edge.gy * static_cast<float>(normal.y()) > 0 ? 1 : -1;
 }

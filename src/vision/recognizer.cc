@@ -16,6 +16,7 @@
 
 #include "model_editor.h"
 #include "model_index.h"
+#include "sampling.h"
 #include "teachsim/base/json.h"
 #include "teachsim/vision/evaluate.h"
 #include "teachsim/vision/recognition_stages.h"
@@ -37,6 +38,7 @@ using internal::MakeOccluder;
 using internal::Occluder;
 using internal::PartPenetration;
 using internal::ReadFixedWorld;
+using internal::SampleGrey;
 
 // ---------------------------------------------------------------- options and models
 
@@ -292,13 +294,6 @@ constexpr int kRivalMaxOwnBalance = 3;
 using Clock = std::chrono::steady_clock;
 double Ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
 
-float SampleGrey(const cv::Mat& m, const Eigen::Vector2d& p) {
-  const double x = std::clamp(p.x(), 0.0, m.cols - 1.001), y = std::clamp(p.y(), 0.0, m.rows - 1.001);
-  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  const double fx = x - x0, fy = y - y0;
-  return static_cast<float>((1 - fy) * ((1 - fx) * m.at<uint8_t>(y0, x0) + fx * m.at<uint8_t>(y0, x0 + 1)) +
-                            fy * ((1 - fx) * m.at<uint8_t>(y0 + 1, x0) + fx * m.at<uint8_t>(y0 + 1, x0 + 1)));
-}
 // The grey-level step across a predicted edge: the smoothed image offset_px to either side of `c`
 // along the unit `normal`, their difference's size.
 double GreyStepAcross(const EdgeMap& edge_map, const Eigen::Vector2d& c, const Eigen::Vector2d& normal,
@@ -599,46 +594,6 @@ bool RestsOnTable(const Model& model, const geometry::Pose3& world_T_object, dou
 }
 
 }  // namespace
-
-double LineRidgeShare(const ImageLine& line, const Camera& camera, const EdgeMap& edge_map, double min_grey) {
-  const Intrinsics& k = camera.intrinsics();
-  auto to_image = [&](const Eigen::Vector2d& undistorted) {
-    return camera.NormalizedToPixel(
-        Eigen::Vector2d((undistorted.x() - k.cx) / k.fx, (undistorted.y() - k.cy) / k.fy));
-  };
-  const double length = line.Length();
-  if (!(length > 1)) return 0;
-  const Eigen::Vector2d along = (line.b - line.a) / length;
-  // The line found along a thin line is one of its flanks (Canny marks both): its darkest (or
-  // brightest) grey within kCorePx, and the grey kSidePx beyond that point on either side.
-  constexpr double kSpacingPx = 3, kEndShare = 0.1, kCorePx = 2, kSidePx = 3;
-  const int n = std::max(3, static_cast<int>((1 - 2 * kEndShare) * length / kSpacingPx));
-  int counted = 0, ridges = 0;
-  for (int i = 0; i < n; ++i) {
-    const Eigen::Vector2d u = line.a + (kEndShare + (1 - 2 * kEndShare) * (i + 0.5) / n) * (line.b - line.a);
-    const Eigen::Vector2d c = to_image(u);
-    if (!camera.InImage(c)) continue;
-    const Eigen::Vector2d d = (to_image(u + along) - c).normalized(), normal(-d.y(), d.x());
-    ++counted;
-    float darkest = 256, brightest = -1;
-    double dark_at = 0, bright_at = 0;
-    for (double o = -kCorePx; o <= kCorePx + 1e-9; o += 0.5) {
-      const float g = SampleGrey(edge_map.smoothed, c + o * normal);
-      if (g < darkest) darkest = g, dark_at = o;
-      if (g > brightest) brightest = g, bright_at = o;
-    }
-    // Both sides at least min_grey brighter than a dark core (or darker than a bright one), and
-    // within min_grey of each other.
-    auto thin = [&](double at, float core, bool dark) {
-      const float left = SampleGrey(edge_map.smoothed, c + (at - kSidePx) * normal);
-      const float right = SampleGrey(edge_map.smoothed, c + (at + kSidePx) * normal);
-      const float stands_out = dark ? std::min(left, right) - core : core - std::max(left, right);
-      return stands_out >= min_grey && std::abs(left - right) < min_grey;
-    };
-    ridges += thin(dark_at, darkest, true) || thin(bright_at, brightest, false);
-  }
-  return counted > 0 ? static_cast<double>(ridges) / counted : 0;
-}
 
 // NetSupportPx (recognition_stages.h), the ranking of the non-maximum suppression: supported length less the
 // unsupported length of the predicted outline, so that of two poses explaining the same image edges the one

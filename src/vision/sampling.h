@@ -1,23 +1,32 @@
 #pragma once
-// Private to the vision module: sub-pixel image sampling shared by the line detector and the
-// calibration's corner snapping.
+// Private to the vision module: sub-pixel image sampling shared by the line detector, the
+// recognizer's evidence and the calibration's corner snapping.
 
+#include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <opencv2/core.hpp>
 
 namespace teachsim::vision::internal {
 
-// Bilinear sample of a CV_32F image at (x, y) in pixels, clamped to the image.
+// Bilinear sample of a one-channel image of T (CV_32F: float; CV_8U: uint8_t) at (x, y) in pixels,
+// clamped to the image.
+template <typename T = float>
 inline float SampleBilinear(const cv::Mat& m, double x, double y) {
   x = std::clamp(x, 0.0, m.cols - 1.001);
   y = std::clamp(y, 0.0, m.rows - 1.001);
   const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
   const double fx = x - x0, fy = y - y0;
-  const float* r0 = m.ptr<float>(y0);
-  const float* r1 = m.ptr<float>(y0 + 1);
+  const T* r0 = m.ptr<T>(y0);
+  const T* r1 = m.ptr<T>(y0 + 1);
   return static_cast<float>((1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
                             fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]));
+}
+
+// Bilinear sample of an 8-bit grey image at a pixel.
+inline float SampleGrey(const cv::Mat& grey8, const Eigen::Vector2d& p) {
+  return SampleBilinear<uint8_t>(grey8, p.x(), p.y());
 }
 
 // 8-bit grey levels as CV_32F; for a camera with a gamma (Camera::gamma) brought back to linear
