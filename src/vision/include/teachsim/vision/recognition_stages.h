@@ -291,9 +291,10 @@ struct ImageCorner {
   std::array<int, 2> segments{-1, -1};              // indices into the image lines
 };
 // Of the samples along an image line (undistorted px; every 3 px, a tenth of it left out at each
-// end), the share where it is a thin line such as wood grain, not a block's edge: the smoothed grey
-// level within 1.5 px of it at least min_grey darker (or brighter) than 3.5 px to either side, and
-// those two sides within min_grey of each other (no step between two surfaces).
+// end), the share where it is a thin line such as wood grain, not a block's edge: the darkest (or
+// brightest) grey of the smoothed image within 2 px across the line, and the grey 3 px beyond that
+// point on both sides, both at least min_grey brighter (or darker) than it and within min_grey of
+// each other (no step between two surfaces). A block's face seen edge-on is such a thin strip too.
 double LineRidgeShare(const ImageLine& line, const Camera& camera, const EdgeMap& edge_map, double min_grey);
 std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& lines, const RecognizerOptions& options);
 // The pieces of one straight edge (split where a shadow, a grain line or another block's edge

@@ -88,12 +88,13 @@ struct RecognizerOptions {
   // 29 -> 34, false 176 -> 171; the mean time per image 23.1 -> 19.3 ms, the slowest of 360 47.4 ->
   // 42.0 ms (seeds 7-12, one process); the POV-Ray dev set (at most 114 corners) unchanged. Chosen on
   // seeds 7-38; held out 39-71: found -7 / +7 / +2, false -4. A block's face seen edge-on is a thin
-  // strip too: the blocks lost are mostly slabs and plates (docs/benchmarks.md, session 44).
+  // strip too: 23 of the 48 blocks lost are slabs and plates (docs/benchmarks.md, session 44).
+  // support_corner_ridge_grey: grey levels (smoothed image) by which a thin line stands out from both
+  // sides; support_corner_ridge_min_corners: the clutter at which the filter acts (the dev set's
+  // images have 39-114 corners, the renders' 55-903).
   double support_corner_ridge_share = 0.5;
-  double support_corner_ridge_grey =
-      8;  // grey levels (smoothed image) a thin line stands out from both sides
-  int support_corner_ridge_min_corners =
-      150;                                   // the filter's clutter: the dev set's images have 39-114 corners
+  double support_corner_ridge_grey = 8;
+  int support_corner_ridge_min_corners = 150;
   double support_min_score = 0.5;            // edge support of a support hypothesis before fitting, 0..1
   double support_perpendicular_tol_deg = 8;  // two horizontal arms on the plane must be this close to 90 deg
   double support_vertical_tol_deg = 4;       // an arm this close to the image vertical may be the vertical edge
