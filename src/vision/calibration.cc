@@ -939,9 +939,7 @@ SnapResult SnapToCorner(const cv::Mat& gray, const Camera& camera, const Eigen::
     corner = next;
   }
   // Back to the distorted image.
-  const Intrinsics& k = camera.intrinsics();
-  const Eigen::Vector2d snapped =
-      camera.NormalizedToPixel({(corner.x() - k.cx) / k.fx, (corner.y() - k.cy) / k.fy});
+  const Eigen::Vector2d snapped = camera.DistortPixel(corner);
   const double offset = (snapped - click).norm();
   if (!snapped.allFinite() || offset > options.max_offset_px) {
     result.reason = "the edges meet " + json::FormatNumber(offset) + " px from the click (more than " +
@@ -1331,9 +1329,7 @@ SnapResult SnapToModelCorner(const cv::Mat& gray, const Camera& camera, const Po
     double extent = 0;
     for (const PredictedEdge& e : edges) extent = std::max(extent, e.r_max);
     const int radius = static_cast<int>(std::ceil(std::min(extent, 60.0) + hw + reach + 3));
-    const Intrinsics& k = camera.intrinsics();
-    const Eigen::Vector2d corner_pixel =
-        camera.NormalizedToPixel({(corner.x() - k.cx) / k.fx, (corner.y() - k.cy) / k.fy});
+    const Eigen::Vector2d corner_pixel = camera.DistortPixel(corner);
     auto patch = MakeIdealPatch(gray, camera, corner_pixel, radius);
     if (!patch) {
       result.reason = "the point lies too close to the image border or beyond the lens model";
@@ -1391,9 +1387,7 @@ SnapResult SnapToModelCorner(const cv::Mat& gray, const Camera& camera, const Po
     corner = next;
     edges = found;  // the next pass leaves out the junction by the edges that are there
   }
-  const Intrinsics& k = camera.intrinsics();
-  const Eigen::Vector2d snapped =
-      camera.NormalizedToPixel({(corner.x() - k.cx) / k.fx, (corner.y() - k.cy) / k.fy});
+  const Eigen::Vector2d snapped = camera.DistortPixel(corner);
   const double offset = (snapped - point.pixel).norm();
   if (!snapped.allFinite() || offset > options.max_offset_px) {
     result.reason = "the edges meet " + json::FormatNumber(offset) + " px from the click (more than " +

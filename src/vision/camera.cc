@@ -191,6 +191,11 @@ std::optional<Eigen::Vector2d> Camera::UndistortPixel(const Eigen::Vector2d& pix
   return Eigen::Vector2d(intrinsics_.fx * n->x() + intrinsics_.cx, intrinsics_.fy * n->y() + intrinsics_.cy);
 }
 
+Eigen::Vector2d Camera::DistortPixel(const Eigen::Vector2d& undistorted) const {
+  return NormalizedToPixel({(undistorted.x() - intrinsics_.cx) / intrinsics_.fx,
+                            (undistorted.y() - intrinsics_.cy) / intrinsics_.fy});
+}
+
 std::optional<Eigen::Vector2d> Camera::ProjectFromCamera(const Eigen::Vector3d& p_in_camera,
                                                          double min_depth_m) const {
   if (!(p_in_camera.z() > min_depth_m)) return std::nullopt;

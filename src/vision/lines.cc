@@ -287,11 +287,6 @@ std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::V
 }
 
 double LineRidgeShare(const ImageLine& line, const Camera& camera, const EdgeMap& edge_map, double min_grey) {
-  const Intrinsics& k = camera.intrinsics();
-  auto to_image = [&](const Eigen::Vector2d& undistorted) {
-    return camera.NormalizedToPixel(
-        Eigen::Vector2d((undistorted.x() - k.cx) / k.fx, (undistorted.y() - k.cy) / k.fy));
-  };
   const double length = line.Length();
   if (!(length > 1)) return 0;
   const Eigen::Vector2d along = (line.b - line.a) / length;
@@ -302,9 +297,9 @@ double LineRidgeShare(const ImageLine& line, const Camera& camera, const EdgeMap
   int counted = 0, ridges = 0;
   for (int i = 0; i < n; ++i) {
     const Eigen::Vector2d u = line.a + (kEndShare + (1 - 2 * kEndShare) * (i + 0.5) / n) * (line.b - line.a);
-    const Eigen::Vector2d c = to_image(u);
+    const Eigen::Vector2d c = camera.DistortPixel(u);
     if (!camera.InImage(c)) continue;
-    const Eigen::Vector2d d = (to_image(u + along) - c).normalized(), normal(-d.y(), d.x());
+    const Eigen::Vector2d d = (camera.DistortPixel(u + along) - c).normalized(), normal(-d.y(), d.x());
     ++counted;
     float darkest = 256, brightest = -1;
     double dark_at = 0, bright_at = 0;

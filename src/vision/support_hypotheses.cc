@@ -419,10 +419,13 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     }
   };
 
+  // In a cluttered image, corners with a thin-line arm propose nothing (RecognizerOptions::
+  // support_corner_ridge_share).
+  const bool skip_thin_arms = options.support_corner_ridge_share > 0 &&
+                              static_cast<int>(corners.size()) >= options.support_corner_ridge_min_corners;
   for (size_t c = 0; c < corners.size(); ++c) {
     const ImageCorner& corner = corners[c];
-    if (options.support_corner_ridge_share > 0 &&
-        static_cast<int>(corners.size()) >= options.support_corner_ridge_min_corners) {
+    if (skip_thin_arms) {
       bool ridge = false;
       for (int k = 0; k < 2 && !ridge; ++k) {
         ridge = LineRidgeShare(ImageLine{corner.point, corner.arm_end[static_cast<size_t>(k)]}, camera,

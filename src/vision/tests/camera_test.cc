@@ -201,6 +201,24 @@ TEST(CameraTest, StraightWorldEdgesAreStraightInNormalizedCoordinates) {
   }
 }
 
+// DistortPixel puts an ideal camera's pixel back where the lens images it: it undoes UndistortPixel
+// across the picture, and agrees with projecting the pixel's ray.
+TEST(CameraTest, DistortPixelUndoesUndistortPixel) {
+  auto camera = Camera::FromSpec(PuzzleCamera());
+  ASSERT_TRUE(camera.ok());
+  const Eigen::Matrix3d K_inv = camera->K().inverse();
+  for (double u : {0.0, 100.5, 319.5, 639.0}) {
+    for (double v : {0.0, 240.25, 479.0}) {
+      const auto ideal = camera->UndistortPixel({u, v});
+      ASSERT_TRUE(ideal.has_value());
+      EXPECT_LT((camera->DistortPixel(*ideal) - Eigen::Vector2d(u, v)).norm(), 1e-9) << u << ", " << v;
+      EXPECT_LT(
+          (camera->DistortPixel(*ideal) - *camera->ProjectFromCamera(K_inv * ideal->homogeneous())).norm(),
+          1e-9);
+    }
+  }
+}
+
 TEST(CameraTest, UndistortRefusesPointsBeyondTheFold) {
   // k1 < 0 alone: r_d = r (1 + k1 r^2) peaks at r = 1/sqrt(-3 k1); beyond its peak value no preimage.
   const Camera camera({500, 500, 320, 240}, {-0.4, 0, 0, 0, 0}, geometry::Pose3::Identity(), 640, 480);

@@ -97,12 +97,11 @@ std::string LinemodOptions::TemplateKey() const {
 cv::Mat UndistortImage(const cv::Mat& image, const vision::Camera& camera) {
   if (camera.distortion().IsZero()) return image;
   cv::Mat map_x(image.rows, image.cols, CV_32FC1), map_y(image.rows, image.cols, CV_32FC1);
-  const vision::Intrinsics& k = camera.intrinsics();
   for (int v = 0; v < image.rows; ++v) {
     float* mx = map_x.ptr<float>(v);
     float* my = map_y.ptr<float>(v);
     for (int u = 0; u < image.cols; ++u) {
-      const Eigen::Vector2d pixel = camera.NormalizedToPixel({(u - k.cx) / k.fx, (v - k.cy) / k.fy});
+      const Eigen::Vector2d pixel = camera.DistortPixel(Eigen::Vector2d(u, v));
       mx[u] = static_cast<float>(pixel.x());
       my[u] = static_cast<float>(pixel.y());
     }

@@ -88,6 +88,8 @@ class Camera {
   // The pixel an ideal (distortion-free) camera with the same intrinsics would see: straight world
   // lines stay straight here, so line fits on undistorted points are valid.
   std::optional<Eigen::Vector2d> UndistortPixel(const Eigen::Vector2d& pixel) const;
+  // The inverse: where the lens puts the ideal camera's pixel in the image.
+  Eigen::Vector2d DistortPixel(const Eigen::Vector2d& undistorted) const;
 
   // Projection of a point. nullopt when it is not in front of the camera (z <= min_depth_m).
   std::optional<Eigen::Vector2d> ProjectFromCamera(const Eigen::Vector3d& p_in_camera,
