@@ -172,7 +172,7 @@ bool SameBetween(const ImageLine& p, const ImageLine& q) {
 }  // namespace
 
 void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
-                       std::vector<ContourOccluder>* occlusions, bool ends_inside) {
+                       std::vector<ContourOccluder>* occlusions, ContourPairing pairing) {
   std::vector<ContourOccluder>& out = *occlusions;
   out.clear();
   struct Passing {
@@ -185,7 +185,7 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
   passage_of.resize(contours.size());
   for (size_t k = 0; k < contours.size(); ++k) {
     const ContourPassage passage = passage_of[k] = PassageThroughBoxImage(contours[k], box);
-    if (passage == ContourPassage::kAcross || (ends_inside && passage != ContourPassage::kNone))
+    if (passage == ContourPassage::kAcross || (pairing.ends_inside && passage != ContourPassage::kNone))
       passing.push_back({&contours[k], passage});
   }
   for (const Passing& p : passing) {
@@ -235,9 +235,11 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
     }
   }
   // One that ends inside with a flank beside the box's image (the pole's other side passes the box
-  // by): the strip between them, when they are no farther apart than the box's image is wide.
+  // by): the strip between them, when they are no farther apart than the box's image is wide and end
+  // alike. One across with a flank beside (pairing.across_beside): the strip at any distance.
   for (const Passing& into : passing) {
-    if (into.passage == ContourPassage::kAcross) continue;
+    const bool across = into.passage == ContourPassage::kAcross;
+    if (across && !pairing.across_beside) continue;
     const ImageLine& p = *into.line;
     const Eigen::Vector2d dp = (p.b - p.a).normalized(), np(-dp.y(), dp.x());
     double lo = std::numeric_limits<double>::infinity(), hi = -lo;
@@ -253,8 +255,8 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
       if (std::abs(dp.dot(dq)) < min_cos) continue;
       const double qa = np.dot(q.a - p.a), qb = np.dot(q.b - p.a);
       const double pa = nq.dot(p.a - q.a), pb = nq.dot(p.b - q.a);
-      if (qa * qb <= 0 || pa * pb <= 0 || std::max(std::abs(qa), std::abs(qb)) > width ||
-          !EndsAlike(p, q, inward(into)) || !SameBetween(p, q)) {
+      if (qa * qb <= 0 || pa * pb <= 0 || !SameBetween(p, q) ||
+          (!across && (std::max(std::abs(qa), std::abs(qb)) > width || !EndsAlike(p, q, inward(into))))) {
         continue;
       }
       out.push_back(Strip(p, q));

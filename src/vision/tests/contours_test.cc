@@ -61,7 +61,7 @@ TEST(ContoursTest, TwoFlanksThatEndInsideHideTheStripUpToTheirEnds) {
   EXPECT_FALSE(ways[0].Hides({220, 240}));
   EXPECT_FALSE(ways[0].Hides({290, 240}));
   // Not with ends_inside false, nor when the strip is darker beyond one flank than inside.
-  ContourOcclusions({left, right}, box, &ways, /*ends_inside=*/false);
+  ContourOcclusions({left, right}, box, &ways, {.ends_inside = false});
   EXPECT_TRUE(ways.empty());
   ContourOcclusions({left, {{270, 400}, {270, 220}}}, box, &ways);
   EXPECT_TRUE(ways.empty());
@@ -80,6 +80,37 @@ TEST(ContoursTest, TwoFlanksThatEndInsideHideTheStripUpToTheirEnds) {
   // Not when it is farther from the first than the box's image is wide (110 px).
   ContourOcclusions({left, {{360, 220}, {360, 400}}}, box, &ways);
   EXPECT_TRUE(ways.empty());
+}
+
+// A pole whose near flank runs across the box's image and whose far flank passes the box by: with
+// ContourPairing::across_beside, the strip between them too, however far apart, when it is on the
+// same side of the grey-level step at both.
+TEST(ContoursTest, AFlankAcrossPairsWithOneBesideWhenAsked) {
+  const BoxImage box = Rectangle();                // x 200-310, y 190-260
+  const ImageLine across{{240, 400}, {240, 100}};  // darker towards +x
+  const ImageLine beside{{330, 100}, {330, 400}};  // darker towards -x: the pole between them
+  ASSERT_EQ(PassageThroughBoxImage(across, box), ContourPassage::kAcross);
+  ASSERT_EQ(PassageThroughBoxImage(beside, box), ContourPassage::kNone);
+  std::vector<ContourOccluder> ways;
+  ContourOcclusions({across, beside}, box, &ways);
+  EXPECT_EQ(ways.size(), 2u);  // by default, either side of the one across only
+  ContourOcclusions({across, beside}, box, &ways, {.across_beside = true});
+  ASSERT_EQ(ways.size(), 3u);
+  const ContourOccluder& strip = ways.back();
+  EXPECT_EQ(strip.count, 2);
+  EXPECT_TRUE(strip.Hides({300, 230}));
+  EXPECT_FALSE(strip.Hides({220, 230}));  // the box's part in view
+  EXPECT_FALSE(strip.Hides({340, 230}));  // past the far flank
+  // Farther off than the box's image is wide (a flank that ends inside would not pair so).
+  ContourOcclusions({across, {{450, 100}, {450, 400}}}, box, &ways, {.across_beside = true});
+  ASSERT_EQ(ways.size(), 3u);
+  EXPECT_TRUE(ways.back().Hides({420, 230}));
+  // Not when the step is the other way at the far one (lighter between them there), nor far from
+  // parallel.
+  ContourOcclusions({across, {{330, 400}, {330, 100}}}, box, &ways, {.across_beside = true});
+  EXPECT_EQ(ways.size(), 2u);
+  ContourOcclusions({across, {{330, 100}, {600, 300}}}, box, &ways, {.across_beside = true});
+  EXPECT_EQ(ways.size(), 2u);
 }
 
 TEST(ContoursTest, OneContourHidesEitherSideAndTwoTheStripBetweenThem) {

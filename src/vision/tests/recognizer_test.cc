@@ -1535,6 +1535,37 @@ TEST(OcclusionTest, ABarWhoseMiddleAnUnknownPoleHidesIsFoundBesideItsContours) {
   EXPECT_EQ(result->objects.size(), 0u);
 }
 
+// A cube whose far part a dark pole hides, the pole's near side across the cube's image and its far
+// side beyond it. On the near side alone, a bar laid from the end in view would end hidden too, so the
+// cube is not taken (AmbiguousExtent); with the strip between the pole's two sides
+// (RecognizerOptions::contour_across_beside), the bar would show its far end past the pole, and the
+// cube is found at its pose.
+TEST(OcclusionTest, ACubeWhoseFarPartAPoleHidesIsFoundInTheStripBetweenThePolesSides) {
+  const Camera camera = SyntheticCamera();
+  const geometry::Pose3 cube_pose = OnTable(Cube().box_size_m, 0, 0, 0.86);
+  cv::Mat image = RenderBoxes(camera, {{Cube().box_size_m, cube_pose}}, 7);
+  double lo = 1e9, hi = -1e9;
+  for (int v = 0; v < 8; ++v) {
+    const double x = camera.Project(cube_pose * BoxVertex(Cube().box_size_m, v))->x();
+    lo = std::min(lo, x), hi = std::max(hi, x);
+  }
+  const double width = hi - lo;
+  cv::rectangle(image, cv::Point(static_cast<int>(lo + 0.5 * width), 0),
+                cv::Point(static_cast<int>(hi + 0.3 * width), image.rows - 1), cv::Scalar(20), cv::FILLED);
+  for (const bool on : {false, true}) {
+    RecognizerOptions options = SmallIndexOptions();
+    options.contour_across_beside = on;
+    auto result = RecognizeCubesAndBars(image, options, nullptr);
+    ASSERT_TRUE(result.ok()) << result.status().message();
+    ASSERT_EQ(result->objects.size(), on ? 1u : 0u) << "strip " << on;
+    if (!on) continue;
+    const Recognition& r = result->objects[0];
+    EXPECT_EQ(r.model, "cube45");
+    EXPECT_LT((r.raw_world_T_object.translation - cube_pose.translation).norm(), 0.002);
+    EXPECT_LT(SymmetricRotationAngle(Cube(), r.raw_world_T_object, cube_pose), 1.0 * M_PI / 180);
+  }
+}
+
 // A block in front with grain on its faces along the hidden edges of a block behind it: the grain is a
 // thin line, not a step in grey level, so it does not count as a hidden edge showing through (the
 // selection's occlusion-consistency test), and both blocks are found. (Counting the grain, the cube

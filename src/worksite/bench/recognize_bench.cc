@@ -39,7 +39,8 @@
 // accepted recognitions partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits), no-contours
 // (no occluding contours: vision::RecognizerOptions::occlusion_contours), no-pole-ends (no strips
 // between flanks that end inside a pose's image: contour_pole_ends; support-pole-ends: in the
-// support-plane source too, support_pole_ends), contourlen-PX, contourstep-GREY,
+// support-plane source too, support_pole_ends), no-across-beside (no strips between a contour across
+// a pose's image and one beside it: contour_across_beside), contourlen-PX, contourstep-GREY,
 // contourcover-X and contourshown-X (their limits), contourlowshown-X and contourlowscore-X (more than
 // half hidden behind a contour: the share in view and the evidence score it needs; contourlowshown-0.5:
 // off), refitrms-PX,
@@ -512,6 +513,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "no-occlusion") return o->occlusion_reverify = false, std::nullopt;
   if (a == "no-contours") return o->occlusion_contours = false, std::nullopt;
   if (a == "no-pole-ends") return o->contour_pole_ends = false, std::nullopt;
+  if (a == "no-across-beside") return o->contour_across_beside = false, std::nullopt;
   if (a == "support-pole-ends") return o->support_pole_ends = true, std::nullopt;
   if (a == "no-rescue") return o->matched_share_rescue = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
@@ -578,7 +580,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, no-refit, skip-any-claim, "
-           "matched-whole-edges, no-occlusion, no-contours, no-pole-ends, support-pole-ends, no-rescue, "
+           "matched-whole-edges, no-occlusion, no-contours, no-pole-ends, no-across-beside, "
+           "support-pole-ends, no-rescue, "
            "rescue-X, "
            "rules-only, index-N, "
            "support-N, "

@@ -351,15 +351,23 @@ struct ContourOccluder {
     return count > 0 && sides[0].Hides(px) && (count < 2 || sides[1].Hides(px));
   }
 };
+// Which pairs of contours ContourOcclusions takes besides two across a box's image.
+struct ContourPairing {
+  bool ends_inside = true;     // contours that end inside the box's image (a pole whose top is in front)
+  bool across_beside = false;  // one across with one beside the box (a pole whose far side passes it by)
+};
 // The ways the contours that pass through a box's image (PassageThroughBoxImage) can hide part of it:
 // either side of each that runs across it, and the strip between each two of them within 30 deg of
 // parallel that do not meet inside it, where two that end inside come from the same side (the flanks
 // of a pole whose top is in front of the box: the strip ends with the shorter one), or one that ends
 // inside with one beside the box no farther from it than the box's image is wide; such a pair's far
 // ends alike (no farther apart along them than they are apart) and the strip on the same side of the
-// grey-level step at both (OccludingContours' orientation). ends_inside false: only contours across.
+// grey-level step at both (OccludingContours' orientation). pairing.ends_inside false: only contours
+// across. pairing.across_beside: also the strip between one across and one beside the box, at any
+// distance, the strip on the same side of the step at both (it hides no more than the side of the one
+// across does; what it adds is the far side's bound, past which a longer model would show: AmbiguousExtent).
 void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
-                       std::vector<ContourOccluder>* occlusions, bool ends_inside = true);
+                       std::vector<ContourOccluder>* occlusions, ContourPairing pairing = {});
 // Whether a pose hidden in part by a contour occluder goes on past it: an edge that runs from the
 // outline in view into the hidden part, continued past its hidden end over its own length, finds
 // image edges with a grey-level step across them (RecognizerOptions::min_step_grey) along 20 px or

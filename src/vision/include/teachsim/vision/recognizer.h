@@ -183,6 +183,15 @@ struct RecognizerOptions {
   // 7-71 (3900 images): found 0.4-0.7 visible 345 -> 359, < 0.4 21 -> 22, >= 0.7 11598 -> 11602,
   // false detections 179 -> 181 (docs/benchmarks.md, session 38).
   bool contour_pole_ends = true;
+  // The occlusion pass also takes the strip between a contour across the pose's image and one beside
+  // it (the far flank of a pole that hides the block's far part; ContourOcclusions). It hides no more
+  // than the near flank's side alone, but bounds it: a longer model laid from the end in view would
+  // show its far end past the far flank, so the shorter one is no longer left open (AmbiguousExtent).
+  // Render seeds 7-38 (1920 images, where it was chosen): found 0.4-0.7 visible 205 -> 221, < 0.4
+  // 17 -> 19, >= 0.7 5772 -> 5777, false detections 70 -> 68; held out, seeds 39-71: 189 -> 205, 17 -> 17,
+  // 5807 -> 5808, 101 -> 100. 40 blocks gained (36 cubes, 4 bars), none lost; about 0.1 ms more per image
+  // (docs/benchmarks.md, session 45). Not in the support-plane source: there, no block changed.
+  bool contour_across_beside = true;
   // The support-plane source takes them too (with contour_pole_ends): a placement short of
   // support_min_score is scored again on the outline beside such flanks. On against off, render seeds
   // 7-71 (3900 images): found 0.4-0.7 visible 379 -> 392, < 0.4 29 -> 33, >= 0.7 +1, false detections
