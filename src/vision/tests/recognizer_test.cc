@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <optional>
@@ -1485,34 +1486,53 @@ TEST(OcclusionTest, ABlockHiddenBehindARecognizedOneIsJudgedOnWhatIsInView) {
 // A bar whose middle something outside the library hides (a dark pole in front, the whole height of
 // the image): judged on the outline in view beside the pole's two contours
 // (RecognizerOptions::occlusion_contours), it is found at its pose; without them nothing is found.
+// The span in x of a box's image (px).
+std::pair<double, double> ImageXSpan(const Camera& camera, const Model& model, const geometry::Pose3& pose) {
+  double lo = 1e9, hi = -1e9;
+  for (int v = 0; v < 8; ++v) {
+    const double x = camera.Project(pose * BoxVertex(model.box_size_m, v))->x();
+    lo = std::min(lo, x), hi = std::max(hi, x);
+  }
+  return {lo, hi};
+}
+
+// A dark pole in front, the whole height of the image, from x0 to x1 (px).
+void DrawPole(cv::Mat* image, double x0, double x1) {
+  cv::rectangle(*image, cv::Point(static_cast<int>(x0), 0), cv::Point(static_cast<int>(x1), image->rows - 1),
+                cv::Scalar(20), cv::FILLED);
+}
+
+// Recognized (cubes and bars) with an option off and on (`set`): nothing found with it off, and with it
+// on one recognition, `model` at `truth` (raw pose: within 2 mm and 1 deg).
+void ExpectFoundOnlyWith(const cv::Mat& image, const std::function<void(RecognizerOptions*, bool)>& set,
+                         const Model& model, const geometry::Pose3& truth) {
+  for (const bool on : {false, true}) {
+    RecognizerOptions options = SmallIndexOptions();
+    set(&options, on);
+    auto result = RecognizeCubesAndBars(image, options, nullptr);
+    ASSERT_TRUE(result.ok()) << result.status().message();
+    ASSERT_EQ(result->objects.size(), on ? 1u : 0u) << "option " << on;
+    if (!on) continue;
+    const Recognition& r = result->objects[0];
+    EXPECT_EQ(r.model, model.name);
+    EXPECT_LT((r.raw_world_T_object.translation - truth.translation).norm(), 0.002);
+    EXPECT_LT(SymmetricRotationAngle(model, r.raw_world_T_object, truth), 1.0 * M_PI / 180);
+  }
+}
+
 TEST(OcclusionTest, ABarWhoseMiddleAnUnknownPoleHidesIsFoundBesideItsContours) {
   const Camera camera = SyntheticCamera();
   const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0, 0, 0.86);
   cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar_pose}}, 7);
   // The pole over the bar's centre, as wide as 4/7 of the bar's image.
-  double lo = 1e9, hi = -1e9;
-  for (int v = 0; v < 8; ++v) {
-    const double x = camera.Project(bar_pose * BoxVertex(Bar().box_size_m, v))->x();
-    lo = std::min(lo, x), hi = std::max(hi, x);
-  }
+  const auto [lo, hi] = ImageXSpan(camera, Bar(), bar_pose);
   const double centre = camera.Project(bar_pose.translation)->x(), half = (hi - lo) / 3.5;
-  cv::rectangle(image, cv::Point(static_cast<int>(centre - half), 0),
-                cv::Point(static_cast<int>(centre + half), image.rows - 1), cv::Scalar(20), cv::FILLED);
-  for (const bool on : {false, true}) {
-    RecognizerOptions options = SmallIndexOptions();
-    options.occlusion_contours = on;
-    // More than half the outline is hidden: judged by the rule for less than contour_min_shown_share
-    // in view (RecognizerOptions::contour_low_shown_share), on these clean edges with an evidence
-    // score above its contour_low_shown_score.
-    auto result = RecognizeCubesAndBars(image, options, nullptr);
-    ASSERT_TRUE(result.ok()) << result.status().message();
-    ASSERT_EQ(result->objects.size(), on ? 1u : 0u) << "contours " << on;
-    if (!on) continue;
-    const Recognition& r = result->objects[0];
-    EXPECT_EQ(r.model, "bar90");
-    EXPECT_LT((r.raw_world_T_object.translation - bar_pose.translation).norm(), 0.002);
-    EXPECT_LT(SymmetricRotationAngle(Bar(), r.raw_world_T_object, bar_pose), 1.0 * M_PI / 180);
-  }
+  DrawPole(&image, centre - half, centre + half);
+  // More than half the outline is hidden: judged by the rule for less than contour_min_shown_share
+  // in view (RecognizerOptions::contour_low_shown_share), on these clean edges with an evidence score
+  // above its contour_low_shown_score.
+  ExpectFoundOnlyWith(
+      image, [](RecognizerOptions* o, bool on) { o->occlusion_contours = on; }, Bar(), bar_pose);
   // Without the rule for more than half hidden, or asking it for a score no pose reaches, the bar
   // is not found.
   for (const bool rule_off : {true, false}) {
@@ -1544,26 +1564,11 @@ TEST(OcclusionTest, ACubeWhoseFarPartAPoleHidesIsFoundInTheStripBetweenThePolesS
   const Camera camera = SyntheticCamera();
   const geometry::Pose3 cube_pose = OnTable(Cube().box_size_m, 0, 0, 0.86);
   cv::Mat image = RenderBoxes(camera, {{Cube().box_size_m, cube_pose}}, 7);
-  double lo = 1e9, hi = -1e9;
-  for (int v = 0; v < 8; ++v) {
-    const double x = camera.Project(cube_pose * BoxVertex(Cube().box_size_m, v))->x();
-    lo = std::min(lo, x), hi = std::max(hi, x);
-  }
-  const double width = hi - lo;
-  cv::rectangle(image, cv::Point(static_cast<int>(lo + 0.5 * width), 0),
-                cv::Point(static_cast<int>(hi + 0.3 * width), image.rows - 1), cv::Scalar(20), cv::FILLED);
-  for (const bool on : {false, true}) {
-    RecognizerOptions options = SmallIndexOptions();
-    options.contour_across_beside = on;
-    auto result = RecognizeCubesAndBars(image, options, nullptr);
-    ASSERT_TRUE(result.ok()) << result.status().message();
-    ASSERT_EQ(result->objects.size(), on ? 1u : 0u) << "strip " << on;
-    if (!on) continue;
-    const Recognition& r = result->objects[0];
-    EXPECT_EQ(r.model, "cube45");
-    EXPECT_LT((r.raw_world_T_object.translation - cube_pose.translation).norm(), 0.002);
-    EXPECT_LT(SymmetricRotationAngle(Cube(), r.raw_world_T_object, cube_pose), 1.0 * M_PI / 180);
-  }
+  // The pole from the middle of the cube's image to 0.3 of its width past it.
+  const auto [lo, hi] = ImageXSpan(camera, Cube(), cube_pose);
+  DrawPole(&image, lo + 0.5 * (hi - lo), hi + 0.3 * (hi - lo));
+  ExpectFoundOnlyWith(
+      image, [](RecognizerOptions* o, bool on) { o->contour_across_beside = on; }, Cube(), cube_pose);
 }
 
 // A block in front with grain on its faces along the hidden edges of a block behind it: the grain is a
