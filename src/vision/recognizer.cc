@@ -80,6 +80,10 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(fraction("support_min_score", support_min_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("support_corner_ridge_share", support_corner_ridge_share));
   TEACHSIM_RETURN_IF_ERROR(positive("support_corner_ridge_grey", support_corner_ridge_grey));
+  if (!(support_contour_reserve >= 0)) {
+    return Status::InvalidInput("RecognizerOptions::support_contour_reserve = " +
+                                std::to_string(support_contour_reserve) + " must be >= 0");
+  }
   if (!(support_corner_ridge_min_corners >= 0)) {
     return Status::InvalidInput("RecognizerOptions::support_corner_ridge_min_corners = " +
                                 std::to_string(support_corner_ridge_min_corners) + " must be >= 0");

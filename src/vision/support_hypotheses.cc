@@ -512,9 +512,9 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
   std::stable_sort(all.begin(), all.end(),
                    HigherScore);
   std::vector<SupportHypothesis> kept;
-  auto keep = [&](const std::vector<SupportHypothesis>& ranked) {
+  auto keep = [&](const std::vector<SupportHypothesis>& ranked, int limit) {
     for (const SupportHypothesis& h : ranked) {
-      if (static_cast<int>(kept.size()) >= options.max_support_hypotheses) break;
+      if (static_cast<int>(kept.size()) >= limit) break;
       const double near_m = 0.25 * models.models[static_cast<size_t>(h.model)].box_size_m.minCoeff();
       bool repeat = false;
       for (const SupportHypothesis& k : kept)
@@ -522,8 +522,12 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
       if (!repeat) kept.push_back(h);
     }
   };
-  keep(all);
-  if (static_cast<int>(kept.size()) < options.max_support_hypotheses) {
+  keep(all, options.max_support_hypotheses);
+  // Those behind a contour fill the room left under the cap, and have at least
+  // options.support_contour_reserve places of their own past it.
+  const int behind_limit = std::max(options.max_support_hypotheses,
+                                    static_cast<int>(kept.size()) + options.support_contour_reserve);
+  if (static_cast<int>(kept.size()) < behind_limit) {
     std::vector<SupportHypothesis> behind;
     for (SupportHypothesis h : short_near_contour) {
       const Eigen::Vector3d& s = models.models[static_cast<size_t>(h.model)].box_size_m;
@@ -536,7 +540,7 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     std::stable_sort(
         behind.begin(), behind.end(),
         HigherScore);
-    keep(behind);
+    keep(behind, behind_limit);
   }
   return kept;
 }

@@ -267,9 +267,9 @@ struct BarOnTheTable {
 
 // A bar on the table whose middle a dark pole hides (a third of the bar's image wide): placements
 // short of the support threshold with the pole near their corner are scored again on the outline in
-// view; they come after all those in full view, best first, and only where these leave room under
-// max_support_hypotheses.
-TEST(ContoursTest, PlacementsBehindAContourFillOnlyTheRoomThoseInViewLeave) {
+// view; they come after all those in full view, best first, where these leave room under
+// max_support_hypotheses, and support_contour_reserve of them past it.
+TEST(ContoursTest, PlacementsBehindAContourFillTheRoomThoseInViewLeaveAndTheirReserve) {
   const auto& [camera, bar, library, bar_pose] = BarOnTheTable();
   double lo = 1e9, hi = -1e9;
   for (int v = 0; v < 8; ++v) {
@@ -284,8 +284,9 @@ TEST(ContoursTest, PlacementsBehindAContourFillOnlyTheRoomThoseInViewLeave) {
   const LineDetection detection = DetectLinesAndEdges(image, camera, options);
   const std::vector<ImageLine> contours = OccludingContours(detection, camera, options);
   const std::vector<ImageCorner> corners = FindCorners(detection.lines, options);
-  auto hypotheses = [&](int max, const std::vector<ImageLine>& occluding) {
+  auto hypotheses = [&](int max, const std::vector<ImageLine>& occluding, int reserve = 0) {
     options.max_support_hypotheses = max;
+    options.support_contour_reserve = reserve;
     return SupportHypotheses(library, camera, detection, corners, {SupportPlane{}}, options, occluding);
   };
   auto count_behind = [](const std::vector<SupportHypothesis>& hs) {
@@ -318,6 +319,14 @@ TEST(ContoursTest, PlacementsBehindAContourFillOnlyTheRoomThoseInViewLeave) {
   ASSERT_EQ(one_more.size(), static_cast<size_t>(in_view) + 1);
   EXPECT_TRUE(one_more.back().behind_contour);
   EXPECT_EQ(one_more.back().score, all[static_cast<size_t>(in_view)].score);
+  // No room left, but a reserve: that many behind past the cap, best first (all of them when it is
+  // larger); with room for one more and a reserve of one, still one.
+  const std::vector<SupportHypothesis> reserved = hypotheses(static_cast<int>(in_view), contours, 1);
+  ASSERT_EQ(reserved.size(), static_cast<size_t>(in_view) + 1);
+  EXPECT_TRUE(reserved.back().behind_contour);
+  EXPECT_EQ(reserved.back().score, all[static_cast<size_t>(in_view)].score);
+  EXPECT_EQ(hypotheses(static_cast<int>(in_view), contours, 1000).size(), all.size());
+  EXPECT_EQ(hypotheses(static_cast<int>(in_view) + 1, contours, 1).size(), static_cast<size_t>(in_view) + 1);
 
   // Without the contours, the same ones in full view and none behind.
   const std::vector<SupportHypothesis> unaided = hypotheses(100, {});

@@ -560,6 +560,7 @@ TEST(OptionsTest, ValidateNamesTheField) {
       {"support_corner_ridge_grey", [](RecognizerOptions& r) { r.support_corner_ridge_grey = 0; }},
       {"support_corner_ridge_min_corners",
        [](RecognizerOptions& r) { r.support_corner_ridge_min_corners = -1; }},
+      {"support_contour_reserve", [](RecognizerOptions& r) { r.support_contour_reserve = -1; }},
   };
   for (const auto& [field, set] : contour_limits) {
     o = RecognizerOptions();

@@ -25,6 +25,7 @@
 // label (see AppendFeatures; tools/fit_evidence_weights.py fits the evidence score to it);
 // TEACHSIM_RECOGNIZE_ABLATION runs the recognizer with options changed, several separated by
 // commas (see ApplyAblation: no-support, plane-only, no-polish, no-refit, rules-only, index-N, support-N,
+// contourreserve-N (placements behind a contour kept past support-N),
 // contrast-X, score-X, evidence-X, accept-X, below-MM, canny-X (both thresholds times X), cannylow-X,
 // cannyhigh-X, eps-X, neighbours-N, queries-N, matched-X, supportmin-X, cornerridge-X (0: the thin-line
 // corner filter off), cornerridgegrey-GREY, cornerridgecorners-N, seglen-PX, junction-PX,
@@ -500,7 +501,8 @@ void AppendFeatures(const std::string& path, const std::string& set_name, const 
 // TEACHSIM_RECOGNIZE_ABLATION: the recognizer with one option changed. "no-support" (the index
 // alone), "plane-only" (support hypotheses fitted on their plane without the 6-DOF refinement),
 // "rules-only" (verification without the evidence score), or NAME-VALUE: index-N (at most N index
-// hypotheses), support-N (at most N support hypotheses), contrast-X (min_edge_contrast), score-X
+// hypotheses), support-N (at most N support hypotheses), contourreserve-N (placements behind an
+// occluding contour kept past that cap), contrast-X (min_edge_contrast), score-X
 // (min_score), evidence-X (min_evidence_score), accept-X (accept_evidence_score), below-MM (culling
 // depth under the table, mm). What is wrong with the value, or nothing.
 std::optional<std::string> ApplyAblation(const std::string& a, vision::RecognizerOptions* o) {
@@ -526,6 +528,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   const std::map<std::string, std::function<void(double)>> setters = {
       {"index", [o](double v) { o->max_hypotheses = static_cast<int>(v); }},
       {"support", [o](double v) { o->max_support_hypotheses = static_cast<int>(v); }},
+      {"contourreserve", [o](double v) { o->support_contour_reserve = static_cast<int>(v); }},
       {"contrast", [o](double v) { o->min_edge_contrast = v; }},
       {"score", [o](double v) { o->min_score = v; }},
       {"evidence", [o](double v) { o->min_evidence_score = v; }},
@@ -584,7 +587,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "support-pole-ends, no-rescue, "
            "rescue-X, "
            "rules-only, index-N, "
-           "support-N, "
+           "support-N, contourreserve-N, "
            "contrast-X, "
            "score-X, evidence-X, accept-X, below-MM, canny-X, cannylow-X, cannyhigh-X, eps-X, "
            "neighbours-N, queries-N, matched-X, supportmin-X, cornerridge-X, cornerridgegrey-GREY, "

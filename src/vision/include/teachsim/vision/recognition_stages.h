@@ -455,9 +455,10 @@ class PlaceSet {
 // Every pose that a corner gives on each plane for each model and resting face, filtered by the
 // arms' perpendicularity on the plane and their lengths against the model's edges, scored by edge
 // support (detection.edge_map), and thinned to the best per model and place: at most
-// options.max_support_hypotheses, best first, each with score >= options.support_min_score. Where
-// fewer pass, those short of it with one of the `contours` near their corner are scored again on
-// the side in view (behind_contour) and fill the rest, best first.
+// options.max_support_hypotheses, best first, each with score >= options.support_min_score. Then
+// those short of it with one of the `contours` near their corner, scored again on the side in view
+// (behind_contour), best first: they fill the room left under the cap, and at least
+// options.support_contour_reserve of them are kept past it.
 std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, const Camera& camera,
                                                  const LineDetection& detection,
                                                  const std::vector<ImageCorner>& corners,

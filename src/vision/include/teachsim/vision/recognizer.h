@@ -79,6 +79,15 @@ struct RecognizerOptions {
   // >= 0.7 visible 4479 -> 4500 of 4738, 0.4-0.7 103 -> 110 of 372, false 68 -> 73 in 1500 images,
   // +0.9 ms per image (held out 19-31: +10, +4, +3 false; docs/benchmarks.md).
   int max_support_hypotheses = 80;
+  // Placements behind an occluding contour (SupportHypotheses' behind_contour) come after those in
+  // full view; this many of them are kept even where those in full view fill max_support_hypotheses
+  // (in the cluttered images that do, a block half hidden behind the contour gets no room). Off (0) by
+  // default: render seeds 7-38 (1920 images, where it was chosen), 30 against 0: found 0.4-0.7
+  // visible 221 -> 225, < 0.4 19 -> 20, >= 0.7 5777 -> 5778, false detections 68 -> 68 (the same with
+  // no limit; 10 found two fewer); held out, seeds 39-71: 205 -> 206, 17 -> 19, 5808 -> 5809, false
+  // 100 -> 102 (both wrong models at blocks missed either way); the support-plane stage about 0.25 ms
+  // longer per image (docs/benchmarks.md, session 45). Ten blocks did not seem worth two false ones.
+  int support_contour_reserve = 0;
   // In a cluttered image (support_corner_ridge_min_corners image corners or more), an image corner
   // one of whose arms is a thin line (LineRidgeShare(arm, support_corner_ridge_grey) >=
   // support_corner_ridge_share; 0: off) proposes nothing: wood grain meeting a block's edge, or two
