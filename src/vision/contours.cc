@@ -169,6 +169,17 @@ bool SameBetween(const ImageLine& p, const ImageLine& q) {
   return dark_toward(p, 0.5 * (q.a + q.b)) == dark_toward(q, 0.5 * (p.a + p.b));
 }
 
+// Whether a contour's line leaves the box's image wholly on one side.
+bool ClearOfBoxImage(const ImageLine& contour, const BoxImage& box) {
+  const Eigen::Vector2d d = contour.b - contour.a, normal(-d.y(), d.x());
+  bool left = false, right = false;
+  for (int i = 0; i < box.hull_size; ++i) {
+    const double side = normal.dot(box.px[static_cast<size_t>(box.hull[i])] - contour.a);
+    left = left || side > 0, right = right || side < 0;
+  }
+  return !(left && right);
+}
+
 }  // namespace
 
 void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
@@ -236,27 +247,32 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
   }
   // One that ends inside with a flank beside the box's image (the pole's other side passes the box
   // by): the strip between them, when they are no farther apart than the box's image is wide and end
-  // alike. One across with a flank beside (pairing.across_beside): the strip at any distance.
+  // alike. One across with a flank beside (pairing.across_beside): the strip at any distance, the
+  // flank's line clear of the box's image (wholly to one side of it).
   for (const Passing& into : passing) {
     const bool across = into.passage == ContourPassage::kAcross;
     if (across && !pairing.across_beside) continue;
     const ImageLine& p = *into.line;
     const Eigen::Vector2d dp = (p.b - p.a).normalized(), np(-dp.y(), dp.x());
-    double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-    for (int k = 0; k < box.hull_size; ++k) {
-      const double d = np.dot(box.px[static_cast<size_t>(box.hull[k])] - p.a);
-      lo = std::min(lo, d), hi = std::max(hi, d);
+    double width = 0;  // of the box's image across p (for one that ends inside)
+    if (!across) {
+      double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+      for (int k = 0; k < box.hull_size; ++k) {
+        const double d = np.dot(box.px[static_cast<size_t>(box.hull[k])] - p.a);
+        lo = std::min(lo, d), hi = std::max(hi, d);
+      }
+      width = hi - lo;
     }
-    const double width = hi - lo;
     for (size_t k = 0; k < contours.size(); ++k) {
-      if (passage_of[k] != ContourPassage::kNone) continue;  // paired above
+      if (passage_of[k] != ContourPassage::kNone) continue;  // passes through the box's image
       const ImageLine& q = contours[k];
       const Eigen::Vector2d dq = (q.b - q.a).normalized(), nq(-dq.y(), dq.x());
       if (std::abs(dp.dot(dq)) < min_cos) continue;
       const double qa = np.dot(q.a - p.a), qb = np.dot(q.b - p.a);
       const double pa = nq.dot(p.a - q.a), pb = nq.dot(p.b - q.a);
-      if (qa * qb <= 0 || pa * pb <= 0 || !SameBetween(p, q) ||
-          (!across && (std::max(std::abs(qa), std::abs(qb)) > width || !EndsAlike(p, q, inward(into))))) {
+      if (qa * qb <= 0 || pa * pb <= 0 || !SameBetween(p, q)) continue;
+      if (across ? !ClearOfBoxImage(q, box)
+                 : (std::max(std::abs(qa), std::abs(qb)) > width || !EndsAlike(p, q, inward(into)))) {
         continue;
       }
       out.push_back(Strip(p, q));

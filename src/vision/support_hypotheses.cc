@@ -113,8 +113,10 @@ double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& cam
   thread_local std::vector<ContourOccluder> occlusions;
   // Flanks that end inside the box's image only with support_pole_ends (off: the stage took 3.5 ms
   // longer per image for 14 more blocks in 3900 images; docs/benchmarks.md, sessions 38 and 42).
-  ContourOcclusions(contours, BoxImage(px, visible), &occlusions,
-                    {.ends_inside = options.contour_pole_ends && options.support_pole_ends});
+  ContourOcclusions(
+      contours, BoxImage(px, visible), &occlusions,
+      {.ends_inside = options.contour_pole_ends && options.support_pole_ends,
+       .across_beside = false});  // measured: no block changed (RecognizerOptions::contour_across_beside)
   if (occlusions.empty()) return -1;
   thread_local std::vector<OutlineSample> samples;
   thread_local std::vector<uint8_t> supported;
@@ -512,9 +514,9 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
   std::stable_sort(all.begin(), all.end(),
                    HigherScore);
   std::vector<SupportHypothesis> kept;
-  auto keep = [&](const std::vector<SupportHypothesis>& ranked, int limit) {
+  auto keep = [&](const std::vector<SupportHypothesis>& ranked, size_t limit) {
     for (const SupportHypothesis& h : ranked) {
-      if (static_cast<int>(kept.size()) >= limit) break;
+      if (kept.size() >= limit) break;
       const double near_m = 0.25 * models.models[static_cast<size_t>(h.model)].box_size_m.minCoeff();
       bool repeat = false;
       for (const SupportHypothesis& k : kept)
@@ -522,12 +524,12 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
       if (!repeat) kept.push_back(h);
     }
   };
-  keep(all, options.max_support_hypotheses);
-  // Those behind a contour fill the room left under the cap, and have at least
-  // options.support_contour_reserve places of their own past it.
-  const int behind_limit = std::max(options.max_support_hypotheses,
-                                    static_cast<int>(kept.size()) + options.support_contour_reserve);
-  if (static_cast<int>(kept.size()) < behind_limit) {
+  keep(all, static_cast<size_t>(options.max_support_hypotheses));
+  // Those behind a contour take the room left under the cap, or options.support_contour_reserve
+  // places if that is more (past the cap).
+  const size_t behind_limit = std::max(static_cast<size_t>(options.max_support_hypotheses),
+                                       kept.size() + static_cast<size_t>(options.support_contour_reserve));
+  if (kept.size() < behind_limit) {
     std::vector<SupportHypothesis> behind;
     for (SupportHypothesis h : short_near_contour) {
       const Eigen::Vector3d& s = models.models[static_cast<size_t>(h.model)].box_size_m;

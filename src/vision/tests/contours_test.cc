@@ -77,8 +77,11 @@ TEST(ContoursTest, TwoFlanksThatEndInsideHideTheStripUpToTheirEnds) {
   EXPECT_TRUE(ways[0].Hides({300, 240}));
   EXPECT_FALSE(ways[0].Hides({300, 200}));
   EXPECT_FALSE(ways[0].Hides({230, 240}));
-  // Not when it is farther from the first than the box's image is wide (110 px).
+  // Not when it is farther from the first than the box's image is wide (110 px), with or without
+  // the pairing of flanks across.
   ContourOcclusions({left, {{360, 220}, {360, 400}}}, box, &ways);
+  EXPECT_TRUE(ways.empty());
+  ContourOcclusions({left, {{360, 220}, {360, 400}}}, box, &ways, {.across_beside = true});
   EXPECT_TRUE(ways.empty());
 }
 
@@ -111,6 +114,15 @@ TEST(ContoursTest, AFlankAcrossPairsWithOneBesideWhenAsked) {
   EXPECT_EQ(ways.size(), 2u);
   ContourOcclusions({across, {{330, 100}, {600, 300}}}, box, &ways, {.across_beside = true});
   EXPECT_EQ(ways.size(), 2u);
+  // Nor with a contour inside the box's image (neither end beyond it: it does not pass through, but
+  // it is no flank beside the box either).
+  const ImageLine inside{{290, 200}, {290, 250}};  // darker towards -x
+  ASSERT_EQ(PassageThroughBoxImage(inside, box), ContourPassage::kNone);
+  ContourOcclusions({across, inside}, box, &ways, {.across_beside = true});
+  EXPECT_EQ(ways.size(), 2u);
+  // With ends_inside off (contours that end inside the box's image left out), the same strip.
+  ContourOcclusions({across, beside}, box, &ways, {.ends_inside = false, .across_beside = true});
+  EXPECT_EQ(ways.size(), 3u);
 }
 
 TEST(ContoursTest, OneContourHidesEitherSideAndTwoTheStripBetweenThem) {
@@ -298,7 +310,7 @@ TEST(ContoursTest, PlacementsBehindAContourFillTheRoomThoseInViewLeaveAndTheirRe
   const std::vector<SupportHypothesis> all = hypotheses(100, contours);
   const auto behind = count_behind(all);
   const auto in_view = static_cast<std::ptrdiff_t>(all.size()) - behind;
-  ASSERT_GE(behind, 1) << contours.size() << " contours";
+  ASSERT_GE(behind, 2) << contours.size() << " contours";  // to tell a reserve of one from more
   ASSERT_GE(in_view, 1);
   EXPECT_EQ(all.front().model, 1);
   EXPECT_LT((all.front().world_T_object.translation - bar_pose.translation).norm(), 0.002);

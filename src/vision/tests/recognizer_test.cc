@@ -545,7 +545,7 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o.occlusion_min_shown_share = 2;
   EXPECT_NE(o.Validate().message().find("occlusion_min_shown_share"), std::string::npos);
   // The occluding contours' limits.
-  const std::pair<const char*, void (*)(RecognizerOptions&)> contour_limits[] = {
+  const std::pair<const char*, void (*)(RecognizerOptions&)> limits[] = {
       {"contour_min_length_px", [](RecognizerOptions& r) { r.contour_min_length_px = 0; }},
       {"contour_min_step_grey", [](RecognizerOptions& r) { r.contour_min_step_grey = -1; }},
       {"contour_max_hidden_coverage", [](RecognizerOptions& r) { r.contour_max_hidden_coverage = 1.5; }},
@@ -562,7 +562,7 @@ TEST(OptionsTest, ValidateNamesTheField) {
        [](RecognizerOptions& r) { r.support_corner_ridge_min_corners = -1; }},
       {"support_contour_reserve", [](RecognizerOptions& r) { r.support_contour_reserve = -1; }},
   };
-  for (const auto& [field, set] : contour_limits) {
+  for (const auto& [field, set] : limits) {
     o = RecognizerOptions();
     set(o);
     EXPECT_NE(o.Validate().message().find(field), std::string::npos) << field;
@@ -1484,9 +1484,6 @@ TEST(OcclusionTest, ABlockHiddenBehindARecognizedOneIsJudgedOnWhatIsInView) {
   EXPECT_EQ(alone->objects[0].model, "bar90");
 }
 
-// A bar whose middle something outside the library hides (a dark pole in front, the whole height of
-// the image): judged on the outline in view beside the pole's two contours
-// (RecognizerOptions::occlusion_contours), it is found at its pose; without them nothing is found.
 // The span in x of a box's image (px).
 std::pair<double, double> ImageXSpan(const Camera& camera, const Model& model, const geometry::Pose3& pose) {
   double lo = 1e9, hi = -1e9;
@@ -1521,6 +1518,9 @@ void ExpectFoundOnlyWith(const cv::Mat& image, const std::function<void(Recogniz
   }
 }
 
+// A bar whose middle something outside the library hides (a dark pole in front, the whole height of
+// the image): judged on the outline in view beside the pole's two contours
+// (RecognizerOptions::occlusion_contours), it is found at its pose; without them nothing is found.
 TEST(OcclusionTest, ABarWhoseMiddleAnUnknownPoleHidesIsFoundBesideItsContours) {
   const Camera camera = SyntheticCamera();
   const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0, 0, 0.86);

@@ -363,9 +363,10 @@ struct ContourPairing {
 // inside with one beside the box no farther from it than the box's image is wide; such a pair's far
 // ends alike (no farther apart along them than they are apart) and the strip on the same side of the
 // grey-level step at both (OccludingContours' orientation). pairing.ends_inside false: only contours
-// across. pairing.across_beside: also the strip between one across and one beside the box, at any
-// distance, the strip on the same side of the step at both (it hides no more than the side of the one
-// across does; what it adds is the far side's bound, past which a longer model would show: AmbiguousExtent).
+// across. pairing.across_beside: also the strip between one across and one beside the box (its line
+// clear of the box's image), at any distance, the strip on the same side of the step at both (it hides no
+// more than the side of the one across does; what it adds is the far side's bound, past which a longer model
+// would show: AmbiguousExtent).
 void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
                        std::vector<ContourOccluder>* occlusions, ContourPairing pairing = {});
 // Whether a pose hidden in part by a contour occluder goes on past it: an edge that runs from the
@@ -457,8 +458,8 @@ class PlaceSet {
 // support (detection.edge_map), and thinned to the best per model and place: at most
 // options.max_support_hypotheses, best first, each with score >= options.support_min_score. Then
 // those short of it with one of the `contours` near their corner, scored again on the side in view
-// (behind_contour), best first: they fill the room left under the cap, and at least
-// options.support_contour_reserve of them are kept past it.
+// (behind_contour), best first: they take the room left under the cap, or
+// options.support_contour_reserve places if that is more (past the cap).
 std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, const Camera& camera,
                                                  const LineDetection& detection,
                                                  const std::vector<ImageCorner>& corners,
