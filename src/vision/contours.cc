@@ -81,18 +81,28 @@ BoxImage::BoxImage(const std::array<Eigen::Vector2d, 8>& vertices_px, uint16_t v
   } while (current != start && hull_size < 8);
 }
 
+namespace {
+
+// Whether a contour's line leaves the box's image wholly on one side.
+bool ClearOfBoxImage(const ImageLine& contour, const BoxImage& box) {
+  const Eigen::Vector2d d = contour.b - contour.a, normal(-d.y(), d.x());
+  bool left = false, right = false;
+  for (int i = 0; i < box.hull_size; ++i) {
+    const double side = normal.dot(box.px[static_cast<size_t>(box.hull[i])] - contour.a);
+    left = left || side > 0, right = right || side < 0;
+  }
+  return !(left && right);
+}
+
+}  // namespace
+
 ContourPassage PassageThroughBoxImage(const ImageLine& contour, const BoxImage& box) {
   constexpr double kBeyondPx = 4, kMinInsidePx = 10, kOwnEdgePx = 3;
   const double length = contour.Length();
   if (!(length > kBeyondPx + kMinInsidePx) || box.hull_size < 3) return ContourPassage::kNone;
   const Eigen::Vector2d along = (contour.b - contour.a) / length, normal(-along.y(), along.x());
   // Quick refusal: the box's image lies wholly on one side of the line.
-  bool left = false, right = false;
-  for (int i = 0; i < box.hull_size; ++i) {
-    const double side = normal.dot(box.px[static_cast<size_t>(box.hull[i])] - contour.a);
-    left = left || side > 0, right = right || side < 0;
-  }
-  if (!left || !right) return ContourPassage::kNone;
+  if (ClearOfBoxImage(contour, box)) return ContourPassage::kNone;
   // Where the line enters and leaves the hull (Cyrus-Beck; inward is to the left of each edge).
   double t_in = -std::numeric_limits<double>::infinity(), t_out = -t_in;
   for (int i = 0; i < box.hull_size; ++i) {
@@ -167,17 +177,6 @@ bool SameBetween(const ImageLine& p, const ImageLine& q) {
     return Eigen::Vector2d(-d.y(), d.x()).dot(point - l.a) > 0;
   };
   return dark_toward(p, 0.5 * (q.a + q.b)) == dark_toward(q, 0.5 * (p.a + p.b));
-}
-
-// Whether a contour's line leaves the box's image wholly on one side.
-bool ClearOfBoxImage(const ImageLine& contour, const BoxImage& box) {
-  const Eigen::Vector2d d = contour.b - contour.a, normal(-d.y(), d.x());
-  bool left = false, right = false;
-  for (int i = 0; i < box.hull_size; ++i) {
-    const double side = normal.dot(box.px[static_cast<size_t>(box.hull[i])] - contour.a);
-    left = left || side > 0, right = right || side < 0;
-  }
-  return !(left && right);
 }
 
 }  // namespace

@@ -57,6 +57,14 @@ Status RecognizerOptions::Validate() const {
     }
     return Status::Ok();
   };
+  // An integer limit that may be 0; `zero` says what 0 means, if anything.
+  auto non_negative = [](const char* name, int v, const char* zero = "") -> Status {
+    if (v < 0) {
+      return Status::InvalidInput(std::string("RecognizerOptions::") + name + " = " + std::to_string(v) +
+                                  " must be >= 0" + zero);
+    }
+    return Status::Ok();
+  };
   TEACHSIM_RETURN_IF_ERROR(positive("canny_low", canny_low));
   TEACHSIM_RETURN_IF_ERROR(positive("canny_high", canny_high));
   if (canny_high < canny_low) {
@@ -80,33 +88,16 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(fraction("support_min_score", support_min_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("support_corner_ridge_share", support_corner_ridge_share));
   TEACHSIM_RETURN_IF_ERROR(positive("support_corner_ridge_grey", support_corner_ridge_grey));
-  if (!(support_contour_reserve >= 0)) {
-    return Status::InvalidInput("RecognizerOptions::support_contour_reserve = " +
-                                std::to_string(support_contour_reserve) + " must be >= 0");
-  }
-  if (!(support_corner_ridge_min_corners >= 0)) {
-    return Status::InvalidInput("RecognizerOptions::support_corner_ridge_min_corners = " +
-                                std::to_string(support_corner_ridge_min_corners) + " must be >= 0");
-  }
-  if (!(conflict_balance_margin >= 0)) {
-    return Status::InvalidInput("RecognizerOptions::conflict_balance_margin = " +
-                                std::to_string(conflict_balance_margin) + " must be >= 0 (0: off)");
-  }
-  if (!(conflict_own_lead >= 0)) {
-    return Status::InvalidInput("RecognizerOptions::conflict_own_lead = " +
-                                std::to_string(conflict_own_lead) + " must be >= 0 (0: off)");
-  }
-  if (!(min_own_balance >= 0)) {
-    return Status::InvalidInput("RecognizerOptions::min_own_balance = " + std::to_string(min_own_balance) +
-                                " must be >= 0 (0: off)");
-  }
+  TEACHSIM_RETURN_IF_ERROR(non_negative("support_contour_reserve", support_contour_reserve));
+  TEACHSIM_RETURN_IF_ERROR(
+      non_negative("support_corner_ridge_min_corners", support_corner_ridge_min_corners));
+  TEACHSIM_RETURN_IF_ERROR(non_negative("conflict_balance_margin", conflict_balance_margin, " (0: off)"));
+  TEACHSIM_RETURN_IF_ERROR(non_negative("conflict_own_lead", conflict_own_lead, " (0: off)"));
+  TEACHSIM_RETURN_IF_ERROR(non_negative("min_own_balance", min_own_balance, " (0: off)"));
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_rank_share", conflict_rank_share));
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_in_image_lead", conflict_in_image_lead));
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_tie_rank_share", conflict_tie_rank_share));
-  if (!(max_alternative_fits >= 0)) {
-    return Status::InvalidInput("RecognizerOptions::max_alternative_fits = " +
-                                std::to_string(max_alternative_fits) + " must be >= 0 (0: none)");
-  }
+  TEACHSIM_RETURN_IF_ERROR(non_negative("max_alternative_fits", max_alternative_fits, " (0: none)"));
   TEACHSIM_RETURN_IF_ERROR(positive("alternatives_per_model", alternatives_per_model));
   TEACHSIM_RETURN_IF_ERROR(positive("support_perpendicular_tol_deg", support_perpendicular_tol_deg));
   TEACHSIM_RETURN_IF_ERROR(positive("support_vertical_tol_deg", support_vertical_tol_deg));
