@@ -324,40 +324,14 @@ size_t PlaceSet::PlaceHash::operator()(const Place& p) const {
   return h;
 }
 
-std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, const Camera& camera,
-                                                 const LineDetection& detection,
-                                                 const std::vector<ImageCorner>& corners,
-                                                 const std::vector<SupportPlane>& planes,
-                                                 const RecognizerOptions& options,
-                                                 const std::vector<ImageLine>& contours) {
-  const Eigen::Matrix3d K = camera.K();
-  const Eigen::Matrix3d K_inv = K.inverse();
-  const geometry::Pose3& camera_T_world = camera.camera_T_world();
-  const geometry::Pose3& world_T_camera = camera.world_T_camera();
-  const Eigen::Vector3d centre = world_T_camera.translation;
-  const Eigen::Matrix3d world_R_camera = world_T_camera.RotationMatrix();
-  const double sin_perpendicular = std::sin(options.support_perpendicular_tol_deg * M_PI / 180);
-  const double vertical_tol = options.support_vertical_tol_deg * M_PI / 180;
-  constexpr double kLengthSlack = 1.1, kLengthSlackM = 0.004;  // an arm may be this much longer than its edge
-  constexpr double kRegionMarginM = 0.01;
+namespace {
 
-  // Where the ray through an undistorted pixel meets the plane z = z_m (in front of the camera).
-  auto on_plane = [&](const Eigen::Vector2d& px, double z_m) -> std::optional<Eigen::Vector3d> {
-    const Eigen::Vector3d d = world_R_camera * (K_inv * Eigen::Vector3d(px.x(), px.y(), 1));
-    if (std::abs(d.z()) < 1e-9) return std::nullopt;
-    const double t = (z_m - centre.z()) / d.z();
-    if (!(t > 0.05)) return std::nullopt;
-    return centre + t * d;
-  };
-  auto project = [&](const Eigen::Vector3d& p_in_world) -> Eigen::Vector2d {
-    return (K * (camera_T_world * p_in_world)).hnormalized();
-  };
-
-  // Resting faces per model: the up axis and its two horizontal axes, without repeats (a box with
-  // two equal sides has two resting faces that look alike).
-  struct Resting {
-    int model, up, a, b;
-  };
+// The resting faces of each model: the up axis and its two horizontal axes, without repeats (a box
+// with two equal sides has two resting faces that look alike).
+struct Resting {
+  int model, up, a, b;
+};
+std::vector<Resting> RestingFaces(const ModelLibrary& models) {
   std::vector<Resting> resting;
   for (size_t m = 0; m < models.models.size(); ++m) {
     const Eigen::Vector3d& s = models.models[m].box_size_m;
@@ -374,22 +348,67 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
       if (!repeat) resting.push_back({static_cast<int>(m), up, a, b});
     }
   }
+  return resting;
+}
 
-  // The occluding contours near a corner: within the image of the largest box that can have its
-  // vertex there (its diagonal at the depth of the highest plane a vertex can lie on, pin-hole).
-  double largest_diagonal_m = 0, highest_m = -std::numeric_limits<double>::infinity();
-  for (const Model& m : models.models) largest_diagonal_m = std::max(largest_diagonal_m, m.box_size_m.norm());
-  for (const SupportPlane& plane : planes) highest_m = std::max(highest_m, plane.z_m + largest_diagonal_m);
-  std::vector<std::vector<ImageLine>> near_by_corner(corners.size());  // the contours near each corner
-  // Placements short of the support threshold with a contour near their corner: scored behind it
-  // (OccludedPlacementSupport) only where the placements in full view leave room, and ranked after
-  // them. Against scoring them as they came, mixed in by score (session 36), one block more is
-  // found in 3900 images and the support-plane stage takes 0.6-1.5 ms less in four of five
-  // alternating runs (docs/benchmarks.md, session 37).
-  std::vector<SupportHypothesis> short_near_contour;
+// The support planes' geometry as the camera sees it: where a pixel's ray meets a horizontal plane,
+// and how far from an image corner a box of the library can reach.
+class PlaneView {
+ public:
+  PlaneView(const ModelLibrary& models, const Camera& camera, const std::vector<SupportPlane>& planes)
+      : K_(camera.K()),
+        K_inv_(K_.inverse()),
+        camera_T_world_(camera.camera_T_world()),
+        centre_(camera.world_T_camera().translation),
+        world_R_camera_(camera.world_T_camera().RotationMatrix()) {
+    for (const Model& m : models.models)
+      largest_diagonal_m_ = std::max(largest_diagonal_m_, m.box_size_m.norm());
+    for (const SupportPlane& plane : planes)
+      highest_m_ = std::max(highest_m_, plane.z_m + largest_diagonal_m_);
+  }
+  // Where the ray through an undistorted pixel meets the plane z = z_m (in front of the camera).
+  std::optional<Eigen::Vector3d> OnPlane(const Eigen::Vector2d& px, double z_m) const {
+    const Eigen::Vector3d d = world_R_camera_ * (K_inv_ * Eigen::Vector3d(px.x(), px.y(), 1));
+    if (std::abs(d.z()) < 1e-9) return std::nullopt;
+    const double t = (z_m - centre_.z()) / d.z();
+    if (!(t > 0.05)) return std::nullopt;
+    return centre_ + t * d;
+  }
+  // The image of the largest box that can have its vertex at `px` reaches this far from it (its
+  // diagonal at the depth of the highest plane a vertex can lie on, pin-hole px).
+  double ReachPx(const Eigen::Vector2d& px) const {
+    const std::optional<Eigen::Vector3d> nearest = OnPlane(px, highest_m_);
+    return nearest ? K_(0, 0) * largest_diagonal_m_ / (camera_T_world_ * *nearest).z()
+                   : std::numeric_limits<double>::infinity();
+  }
 
-  std::vector<SupportHypothesis> all;
-  PlaceSet scored(models);  // a placement tried before is not scored again (PlaceSet)
+ private:
+  Eigen::Matrix3d K_, K_inv_;
+  geometry::Pose3 camera_T_world_;
+  Eigen::Vector3d centre_;
+  Eigen::Matrix3d world_R_camera_;
+  double largest_diagonal_m_ = 0, highest_m_ = -std::numeric_limits<double>::infinity();
+};
+
+// Every placement the corners give: each model on each of its resting faces and each plane, with the corner
+// on its bottom or top plane, filtered by the arms' perpendicularity on the plane and their lengths against
+// the model's edges, inside the work area and in front of the camera, each once (PlaceSet). visit(h) with h's
+// model, pose, corner and plane set, its score 0.
+template <typename Visit>
+void ForEachPlacement(const ModelLibrary& models, const Camera& camera, const LineDetection& detection,
+                      const std::vector<ImageCorner>& corners, const std::vector<SupportPlane>& planes,
+                      const RecognizerOptions& options, const PlaneView& view, Visit&& visit) {
+  const Eigen::Matrix3d K = camera.K();
+  const geometry::Pose3& camera_T_world = camera.camera_T_world();
+  const double sin_perpendicular = std::sin(options.support_perpendicular_tol_deg * M_PI / 180);
+  const double vertical_tol = options.support_vertical_tol_deg * M_PI / 180;
+  constexpr double kLengthSlack = 1.1, kLengthSlackM = 0.004;  // an arm may be this much longer than its edge
+  constexpr double kRegionMarginM = 0.01;
+  auto project = [&](const Eigen::Vector3d& p_in_world) -> Eigen::Vector2d {
+    return (K * (camera_T_world * p_in_world)).hnormalized();
+  };
+  const std::vector<Resting> resting = RestingFaces(models);
+  PlaceSet seen(models);
   // The box with its corner at `corner`, its axis i along u_i (unit, horizontal), j along u_j and
   // the up axis rising (bottom corner) or falling (top corner) from the corner.
   auto emit = [&](const Resting& r, int i, int j, const Eigen::Vector3d& corner, const Eigen::Vector3d& u_i,
@@ -409,16 +428,10 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
     h.model = r.model;
     h.world_T_object = geometry::Pose3(Eigen::Quaterniond(rotation).normalized(), middle);
     const geometry::Pose3 camera_T_object = camera_T_world * h.world_T_object;
-    if (!(camera_T_object.translation.z() > 0.05) || !scored.Insert(r.model, h.world_T_object)) return;
-    h.score = PlacementSupport(s, camera, camera_T_object, detection.edge_map, options);
+    if (!(camera_T_object.translation.z() > 0.05) || !seen.Insert(r.model, h.world_T_object)) return;
     h.corner = corner_index;
     h.plane = plane_index;
-    h.behind_contour = false;
-    if (h.score >= 0) {
-      all.push_back(h);
-    } else if (!near_by_corner[static_cast<size_t>(corner_index)].empty()) {
-      short_near_contour.push_back(h);
-    }
+    visit(h);
   };
 
   // In a cluttered image, corners with a thin-line arm propose nothing (RecognizerOptions::
@@ -437,17 +450,9 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
       if (ridge) continue;
     }
     int vertical[2];
-    for (int k = 0; k < 2; ++k) vertical[k] = VerticalArm(K, camera_T_world, corner.point, corner.arm_end[static_cast<size_t>(k)], vertical_tol);
-    if (!contours.empty()) {
-      const std::optional<Eigen::Vector3d> nearest = on_plane(corner.point, highest_m);
-      const double reach_px = nearest ? K(0, 0) * largest_diagonal_m / (camera_T_world * *nearest).z()
-                                      : std::numeric_limits<double>::infinity();
-      for (const ImageLine& line : contours) {
-        const Eigen::Vector2d d = line.b - line.a;
-        const double t = std::clamp(d.dot(corner.point - line.a) / d.squaredNorm(), 0.0, 1.0);
-        if ((line.a + t * d - corner.point).norm() <= reach_px) near_by_corner[c].push_back(line);
-      }
-    }
+    for (int k = 0; k < 2; ++k)
+      vertical[k] =
+          VerticalArm(K, camera_T_world, corner.point, corner.arm_end[static_cast<size_t>(k)], vertical_tol);
     for (size_t p = 0; p < planes.size(); ++p) {
       const SupportPlane& plane = planes[p];
       for (const Resting& r : resting) {
@@ -455,7 +460,7 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
         for (int level = 0; level < 2; ++level) {
           const bool bottom = level == 0;
           const double z = plane.z_m + (bottom ? 0.0 : s[r.up]);
-          const std::optional<Eigen::Vector3d> at = on_plane(corner.point, z);
+          const std::optional<Eigen::Vector3d> at = view.OnPlane(corner.point, z);
           if (!at) continue;
           const Eigen::Vector3d P = *at;
           if ((P.head<2>() - plane.min_xy).minCoeff() < -kRegionMarginM ||
@@ -466,7 +471,7 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
           std::optional<Eigen::Vector3d> u[2];
           double length[2] = {0, 0};
           for (int k = 0; k < 2; ++k) {
-            const auto q = on_plane(corner.arm_end[static_cast<size_t>(k)], z);
+            const auto q = view.OnPlane(corner.arm_end[static_cast<size_t>(k)], z);
             if (!q) continue;
             Eigen::Vector3d d = *q - P;
             d.z() = 0;
@@ -509,22 +514,71 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
       }
     }
   }
+}
+
+// Appends to `kept`, best first, the hypotheses of `ranked` (sorted best first) not at the place of
+// one kept (SamePlace within a quarter of the model's smallest side), until it holds `limit`.
+void KeepBestPerPlace(const ModelLibrary& models, const std::vector<SupportHypothesis>& ranked, size_t limit,
+                      std::vector<SupportHypothesis>* kept) {
+  for (const SupportHypothesis& h : ranked) {
+    if (kept->size() >= limit) break;
+    const Model& model = models.models[static_cast<size_t>(h.model)];
+    const double near_m = 0.25 * model.box_size_m.minCoeff();
+    bool repeat = false;
+    for (const SupportHypothesis& k : *kept) repeat = repeat || SamePlace(model, h, k, near_m);
+    if (!repeat) kept->push_back(h);
+  }
+}
+
+}  // namespace
+
+std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, const Camera& camera,
+                                                 const LineDetection& detection,
+                                                 const std::vector<ImageCorner>& corners,
+                                                 const std::vector<SupportPlane>& planes,
+                                                 const RecognizerOptions& options,
+                                                 const std::vector<ImageLine>& contours) {
+  const Eigen::Matrix3d K = camera.K();
+  const geometry::Pose3& camera_T_world = camera.camera_T_world();
+  const PlaneView view(models, camera, planes);
+
+  // The occluding contours near each corner: within the image of the largest box that can have its
+  // vertex there.
+  std::vector<std::vector<ImageLine>> near_by_corner(corners.size());
+  if (!contours.empty()) {
+    for (size_t c = 0; c < corners.size(); ++c) {
+      const Eigen::Vector2d& at = corners[c].point;
+      const double reach_px = view.ReachPx(at);
+      for (const ImageLine& line : contours) {
+        const Eigen::Vector2d d = line.b - line.a;
+        const double t = std::clamp(d.dot(at - line.a) / d.squaredNorm(), 0.0, 1.0);
+        if ((line.a + t * d - at).norm() <= reach_px) near_by_corner[c].push_back(line);
+      }
+    }
+  }
+  // Placements short of the support threshold with a contour near their corner: scored behind it
+  // (OccludedPlacementSupport) only where the placements in full view leave room, and ranked after
+  // them. Against scoring them as they came, mixed in by score (session 36), one block more is
+  // found in 3900 images and the support-plane stage takes 0.6-1.5 ms less in four of five
+  // alternating runs (docs/benchmarks.md, session 37).
+  std::vector<SupportHypothesis> short_near_contour;
+  std::vector<SupportHypothesis> all;
+  ForEachPlacement(
+      models, camera, detection, corners, planes, options, view, [&](const SupportHypothesis& placed) {
+        SupportHypothesis h = placed;
+        const Eigen::Vector3d& s = models.models[static_cast<size_t>(h.model)].box_size_m;
+        h.score = PlacementSupport(s, camera, camera_T_world * h.world_T_object, detection.edge_map, options);
+        if (h.score >= 0) {
+          all.push_back(h);
+        } else if (!near_by_corner[static_cast<size_t>(h.corner)].empty()) {
+          short_near_contour.push_back(h);
+        }
+      });
 
   // The best few per model and place.
-  std::stable_sort(all.begin(), all.end(),
-                   HigherScore);
+  std::stable_sort(all.begin(), all.end(), HigherScore);
   std::vector<SupportHypothesis> kept;
-  auto keep = [&](const std::vector<SupportHypothesis>& ranked, size_t limit) {
-    for (const SupportHypothesis& h : ranked) {
-      if (kept.size() >= limit) break;
-      const double near_m = 0.25 * models.models[static_cast<size_t>(h.model)].box_size_m.minCoeff();
-      bool repeat = false;
-      for (const SupportHypothesis& k : kept)
-        repeat = repeat || SamePlace(models.models[static_cast<size_t>(h.model)], h, k, near_m);
-      if (!repeat) kept.push_back(h);
-    }
-  };
-  keep(all, static_cast<size_t>(options.max_support_hypotheses));
+  KeepBestPerPlace(models, all, static_cast<size_t>(options.max_support_hypotheses), &kept);
   // Those behind a contour take the room left under the cap, or options.support_contour_reserve
   // places if that is more (past the cap).
   const size_t behind_limit = std::max(static_cast<size_t>(options.max_support_hypotheses),
@@ -539,10 +593,8 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
       h.behind_contour = true;
       if (h.score >= 0) behind.push_back(h);
     }
-    std::stable_sort(
-        behind.begin(), behind.end(),
-        HigherScore);
-    keep(behind, behind_limit);
+    std::stable_sort(behind.begin(), behind.end(), HigherScore);
+    KeepBestPerPlace(models, behind, behind_limit, &kept);
   }
   return kept;
 }
