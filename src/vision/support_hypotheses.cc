@@ -374,8 +374,9 @@ class PlaneView {
     if (!(t > 0.05)) return std::nullopt;
     return centre_ + t * d;
   }
-  // The image of the largest box that can have its vertex at `px` reaches this far from it (its
-  // diagonal at the depth of the highest plane a vertex can lie on, pin-hole px).
+  // How far from `px` (undistorted) the image of the largest box that can have a vertex there reaches:
+  // its diagonal, at the depth of the highest plane a vertex can lie on, projected by the pin-hole
+  // model.
   double ReachPx(const Eigen::Vector2d& px) const {
     const std::optional<Eigen::Vector3d> nearest = OnPlane(px, highest_m_);
     return nearest ? K_(0, 0) * largest_diagonal_m_ / (camera_T_world_ * *nearest).z()
@@ -392,8 +393,9 @@ class PlaneView {
 
 // Every placement the corners give: each model on each of its resting faces and each plane, with the corner
 // on its bottom or top plane, filtered by the arms' perpendicularity on the plane and their lengths against
-// the model's edges, inside the work area and in front of the camera, each once (PlaceSet). visit(h) with h's
-// model, pose, corner and plane set, its score 0.
+// the model's edges, inside the work area and in front of the camera. A placement that two corners (or two
+// arms of one) give is visited once (PlaceSet): it is not scored again. visit(h) receives each as a
+// SupportHypothesis whose model, pose, corner and plane are set and whose score is still 0.
 template <typename Visit>
 void ForEachPlacement(const ModelLibrary& models, const Camera& camera, const LineDetection& detection,
                       const std::vector<ImageCorner>& corners, const std::vector<SupportPlane>& planes,
@@ -543,7 +545,8 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
   const PlaneView view(models, camera, planes);
 
   // The occluding contours near each corner: within the image of the largest box that can have its
-  // vertex there.
+  // vertex there. Also worked out for the corners that ForEachPlacement skips for a thin-line arm:
+  // those give no placement, so their lists are never read.
   std::vector<std::vector<ImageLine>> near_by_corner(corners.size());
   if (!contours.empty()) {
     for (size_t c = 0; c < corners.size(); ++c) {
@@ -563,17 +566,15 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
   // alternating runs (docs/benchmarks.md, session 37).
   std::vector<SupportHypothesis> short_near_contour;
   std::vector<SupportHypothesis> all;
-  ForEachPlacement(
-      models, camera, detection, corners, planes, options, view, [&](const SupportHypothesis& placed) {
-        SupportHypothesis h = placed;
-        const Eigen::Vector3d& s = models.models[static_cast<size_t>(h.model)].box_size_m;
-        h.score = PlacementSupport(s, camera, camera_T_world * h.world_T_object, detection.edge_map, options);
-        if (h.score >= 0) {
-          all.push_back(h);
-        } else if (!near_by_corner[static_cast<size_t>(h.corner)].empty()) {
-          short_near_contour.push_back(h);
-        }
-      });
+  ForEachPlacement(models, camera, detection, corners, planes, options, view, [&](SupportHypothesis h) {
+    const Eigen::Vector3d& s = models.models[static_cast<size_t>(h.model)].box_size_m;
+    h.score = PlacementSupport(s, camera, camera_T_world * h.world_T_object, detection.edge_map, options);
+    if (h.score >= 0) {
+      all.push_back(h);
+    } else if (!near_by_corner[static_cast<size_t>(h.corner)].empty()) {
+      short_near_contour.push_back(h);
+    }
+  });
 
   // The best few per model and place.
   std::stable_sort(all.begin(), all.end(), HigherScore);
