@@ -394,8 +394,9 @@ class PlaneView {
 // Every placement the corners give: each model on each of its resting faces and each plane, with the corner
 // on its bottom or top plane, filtered by the arms' perpendicularity on the plane and their lengths against
 // the model's edges, inside the work area and in front of the camera. A placement that two corners (or two
-// arms of one) give is visited once (PlaceSet): it is not scored again. visit(h) receives each as a
-// SupportHypothesis whose model, pose, corner and plane are set and whose score is still 0.
+// arms of one) give is visited once (PlaceSet): it is not scored again. visit(h, camera_T_object) receives
+// each as a SupportHypothesis whose model, pose, corner and plane are set and whose score is still 0,
+// with its pose in the camera frame (computed here for the in-front test: not again by the visitor).
 template <typename Visit>
 void ForEachPlacement(const ModelLibrary& models, const Camera& camera, const LineDetection& detection,
                       const std::vector<ImageCorner>& corners, const std::vector<SupportPlane>& planes,
@@ -433,7 +434,7 @@ void ForEachPlacement(const ModelLibrary& models, const Camera& camera, const Li
     if (!(camera_T_object.translation.z() > 0.05) || !seen.Insert(r.model, h.world_T_object)) return;
     h.corner = corner_index;
     h.plane = plane_index;
-    visit(h);
+    visit(h, camera_T_object);
   };
 
   // In a cluttered image, corners with a thin-line arm propose nothing (RecognizerOptions::
@@ -566,15 +567,16 @@ std::vector<SupportHypothesis> SupportHypotheses(const ModelLibrary& models, con
   // alternating runs (docs/benchmarks.md, session 37).
   std::vector<SupportHypothesis> short_near_contour;
   std::vector<SupportHypothesis> all;
-  ForEachPlacement(models, camera, detection, corners, planes, options, view, [&](SupportHypothesis h) {
-    const Eigen::Vector3d& s = models.models[static_cast<size_t>(h.model)].box_size_m;
-    h.score = PlacementSupport(s, camera, camera_T_world * h.world_T_object, detection.edge_map, options);
-    if (h.score >= 0) {
-      all.push_back(h);
-    } else if (!near_by_corner[static_cast<size_t>(h.corner)].empty()) {
-      short_near_contour.push_back(h);
-    }
-  });
+  ForEachPlacement(models, camera, detection, corners, planes, options, view,
+                   [&](SupportHypothesis h, const geometry::Pose3& camera_T_object) {
+                     const Eigen::Vector3d& s = models.models[static_cast<size_t>(h.model)].box_size_m;
+                     h.score = PlacementSupport(s, camera, camera_T_object, detection.edge_map, options);
+                     if (h.score >= 0) {
+                       all.push_back(h);
+                     } else if (!near_by_corner[static_cast<size_t>(h.corner)].empty()) {
+                       short_near_contour.push_back(h);
+                     }
+                   });
 
   // The best few per model and place.
   std::stable_sort(all.begin(), all.end(), HigherScore);
