@@ -159,6 +159,20 @@ ContourOccluder Strip(const ImageLine& p, const ImageLine& q) {
   return o;
 }
 
+// A pole's top: a strip between flanks that end inside a box's image goes on past their ends by half
+// its width (the flanks of a round pole end where its top's ellipse is widest; the ellipse reaches at
+// most its radius beyond). Each side whose contour ends inside (inward: the direction it runs in
+// there, zero for one that does not) is lengthened at that end.
+void ExtendOverPoleTop(ContourOccluder* o, const std::array<Eigen::Vector2d, 2>& inward, double by_px) {
+  for (int k = 0; k < 2; ++k) {
+    ContourOccluder::Side& side = o->sides[static_cast<size_t>(k)];
+    const Eigen::Vector2d& in = inward[static_cast<size_t>(k)];
+    if (in == Eigen::Vector2d::Zero()) continue;
+    if (in.dot(side.along) < 0) side.a -= by_px * side.along;
+    side.length += by_px;
+  }
+}
+
 // Whether two flanks end alike in the direction `inward` (unit): their far ends that way no farther
 // apart along it than the flanks are apart (the two sides of a pole end where its top begins).
 bool EndsAlike(const ImageLine& p, const ImageLine& q, const Eigen::Vector2d& inward) {
@@ -242,6 +256,10 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
       const double pa = nq.dot(p.a - q.a), pb = nq.dot(p.b - q.a);
       if (qa * qb <= 0 || pa * pb <= 0) continue;
       out.push_back(Strip(p, q));
+      // Half the strip's width: half the mean distance of q's ends from p's line.
+      if (pairing.pole_tops && (ip != Eigen::Vector2d::Zero() || iq != Eigen::Vector2d::Zero())) {
+        ExtendOverPoleTop(&out.back(), {ip, iq}, 0.25 * (std::abs(qa) + std::abs(qb)));
+      }
     }
   }
   // One that ends inside with a flank beside the box's image (the pole's other side passes the box
@@ -275,6 +293,9 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
         continue;
       }
       out.push_back(Strip(p, q));
+      if (pairing.pole_tops && !across) {
+        ExtendOverPoleTop(&out.back(), {inward(into), inward(into)}, 0.25 * (std::abs(qa) + std::abs(qb)));
+      }
     }
   }
 }

@@ -1677,9 +1677,10 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
         px[static_cast<size_t>(v)] = (K_ * (pose * BoxVertex(model.box_size_m, v))).hnormalized();
       const uint16_t visible = VisibleBoxEdges(model.box_size_m, pose.Inverse().translation);
       std::vector<ContourOccluder> occlusions;
-      ContourOcclusions(
-          contours, BoxImage(px, visible), &occlusions,
-          {.ends_inside = options_.contour_pole_ends, .across_beside = options_.contour_across_beside});
+      ContourOcclusions(contours, BoxImage(px, visible), &occlusions,
+                        {.ends_inside = options_.contour_pole_ends,
+                         .across_beside = options_.contour_across_beside,
+                         .pole_tops = options_.contour_pole_tops});
       for (const ContourOccluder& contour : occlusions) {
         Hiding hiding;
         hiding.contour = &contour;

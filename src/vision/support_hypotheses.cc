@@ -113,10 +113,11 @@ double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& cam
   thread_local std::vector<ContourOccluder> occlusions;
   // Flanks that end inside the box's image only with support_pole_ends (off: the stage took 3.5 ms
   // longer per image for 14 more blocks in 3900 images; docs/benchmarks.md, sessions 38 and 42).
-  ContourOcclusions(
-      contours, BoxImage(px, visible), &occlusions,
-      {.ends_inside = options.contour_pole_ends && options.support_pole_ends,
-       .across_beside = false});  // measured: no block changed (RecognizerOptions::contour_across_beside)
+  ContourOcclusions(contours, BoxImage(px, visible), &occlusions,
+                    {.ends_inside = options.contour_pole_ends && options.support_pole_ends,
+                     .across_beside = false,
+                     .pole_tops = options.contour_pole_tops});  // measured: no block changed
+                                                                // (RecognizerOptions::contour_across_beside)
   if (occlusions.empty()) return -1;
   thread_local std::vector<OutlineSample> samples;
   thread_local std::vector<uint8_t> supported;

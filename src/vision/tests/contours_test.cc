@@ -85,6 +85,42 @@ TEST(ContoursTest, TwoFlanksThatEndInsideHideTheStripUpToTheirEnds) {
   EXPECT_TRUE(ways.empty());
 }
 
+// ContourPairing::pole_tops: the strip between flanks that end inside goes on past their ends by half
+// its width (a round pole's top), and no farther, nor beyond the flanks' sides.
+TEST(ContoursTest, APoleTopHidesHalfTheStripsWidthPastTheFlanksEnds) {
+  const BoxImage box = Rectangle();                                             // x 200-310, y 190-260
+  const ImageLine left{{240, 400}, {240, 220}}, right{{270, 220}, {270, 400}};  // 30 px apart
+  std::vector<ContourOccluder> ways;
+  ContourOcclusions({left, right}, box, &ways, {.pole_tops = true});
+  ASSERT_EQ(ways.size(), 1u);
+  EXPECT_TRUE(ways[0].Hides({255, 240}));
+  EXPECT_TRUE(ways[0].Hides({255, 208}));   // 12 px past the ends: under the top
+  EXPECT_FALSE(ways[0].Hides({255, 198}));  // 22 px past: beyond it
+  EXPECT_FALSE(ways[0].Hides({225, 208}));
+  EXPECT_FALSE(ways[0].Hides({285, 208}));
+  // The same flanks drawn from their inner ends (a lighter pole on a darker ground): the same top.
+  const ImageLine left_down{{240, 220}, {240, 400}}, right_down{{270, 400}, {270, 220}};
+  for (const auto& flanks :
+       {std::vector<ImageLine>{left_down, right_down}, std::vector<ImageLine>{right_down, left_down}}) {
+    ContourOcclusions(flanks, box, &ways, {.pole_tops = true});
+    ASSERT_EQ(ways.size(), 1u);
+    EXPECT_TRUE(ways[0].Hides({255, 208}));
+    EXPECT_FALSE(ways[0].Hides({255, 198}));
+  }
+
+  // One flank inside, the other beside the box, 90 px apart: the top reaches 45 px past the end.
+  const ImageLine beside{{330, 220}, {330, 400}};
+  ContourOcclusions({left, beside}, box, &ways, {.pole_tops = true});
+  ASSERT_EQ(ways.size(), 1u);
+  EXPECT_TRUE(ways[0].Hides({300, 180}));   // 40 px past
+  EXPECT_FALSE(ways[0].Hides({300, 170}));  // 50 px past
+  EXPECT_FALSE(ways[0].Hides({230, 240}));
+  // Without pole_tops the strip ends with the flanks.
+  ContourOcclusions({left, beside}, box, &ways);
+  ASSERT_EQ(ways.size(), 1u);
+  EXPECT_FALSE(ways[0].Hides({300, 200}));
+}
+
 // A pole whose near flank runs across the box's image and whose far flank passes the box by: with
 // ContourPairing::across_beside, the strip between them too, however far apart, when it is on the
 // same side of the grey-level step at both.
@@ -371,6 +407,7 @@ TEST(ContoursTest, APlacementBesideAPoleWhoseTopIsInFrontNeedsSupportPoleEnds) {
                 cv::Point(static_cast<int>(centre - half), static_cast<int>(top + 0.3 * (bottom - top))),
                 cv::Point(static_cast<int>(centre + half), image.rows - 1), cv::Scalar(20), cv::FILLED);
   RecognizerOptions options;
+  options.contour_pole_tops = false;  // this pole's top is square: no round top past its flanks
   const LineDetection detection = DetectLinesAndEdges(image, camera, options);
   const std::vector<ImageLine> contours = OccludingContours(detection, camera, options);
   const std::vector<ImageCorner> corners = FindCorners(detection.lines, options);

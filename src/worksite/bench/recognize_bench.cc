@@ -39,7 +39,8 @@
 // unjudged; the evidence score that accepts them), no-occlusion (no second judgement of poses that
 // accepted recognitions partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits), no-contours
 // (no occluding contours: vision::RecognizerOptions::occlusion_contours), no-pole-ends (no strips
-// between flanks that end inside a pose's image: contour_pole_ends; support-pole-ends: in the
+// between flanks that end inside a pose's image: contour_pole_ends; no-pole-tops: such strips end
+// with their flanks, contour_pole_tops; support-pole-ends: in the
 // support-plane source too, support_pole_ends), no-across-beside (no strips between a contour across
 // a pose's image and one beside it: contour_across_beside), contourlen-PX, contourstep-GREY,
 // contourcover-X and contourshown-X (their limits), contourlowshown-X and contourlowscore-X (more than
@@ -383,6 +384,14 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
   const std::string stem = dir + "/" + (c.name.size() > 4 && c.name.substr(c.name.size() - 4) == ".png"
                                              ? c.name.substr(0, c.name.size() - 4)
                                              : c.name);
+  // A render's name holds its seed's folder ("seed8/render_13"): made here.
+  std::error_code made;
+  std::filesystem::create_directories(std::filesystem::path(stem).parent_path(), made);
+  if (made) {
+    std::fprintf(stderr, "teachsim: warning: cannot create the dump folder for %s: %s\n", stem.c_str(),
+                 made.message().c_str());
+    return;
+  }
   cv::imwrite(stem + ".png", out);
   cv::imwrite(stem + ".edges.png", detection.edge_map.edges);
   // Each missed block close up (3x, nearest neighbour): the segments, the support-plane source's
@@ -515,6 +524,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "no-occlusion") return o->occlusion_reverify = false, std::nullopt;
   if (a == "no-contours") return o->occlusion_contours = false, std::nullopt;
   if (a == "no-pole-ends") return o->contour_pole_ends = false, std::nullopt;
+  if (a == "no-pole-tops") return o->contour_pole_tops = false, std::nullopt;
   if (a == "no-across-beside") return o->contour_across_beside = false, std::nullopt;
   if (a == "support-pole-ends") return o->support_pole_ends = true, std::nullopt;
   if (a == "no-rescue") return o->matched_share_rescue = false, std::nullopt;

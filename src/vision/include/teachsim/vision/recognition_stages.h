@@ -355,6 +355,7 @@ struct ContourOccluder {
 struct ContourPairing {
   bool ends_inside = true;     // contours that end inside the box's image (a pole whose top is in front)
   bool across_beside = false;  // one across with one beside the box (a pole whose far side passes it by)
+  bool pole_tops = false;      // a strip whose flanks end inside goes on past their ends by half its width
 };
 // The ways the contours that pass through a box's image (PassageThroughBoxImage) can hide part of it:
 // either side of each that runs across it, and the strip between each two of them within 30 deg of
@@ -366,7 +367,8 @@ struct ContourPairing {
 // across. pairing.across_beside: also the strip between one across and one beside the box (its line
 // clear of the box's image), at any distance, the strip on the same side of the step at both (it hides no
 // more than the side of the one across does; what it adds is the far side's bound, past which a longer model
-// would show: AmbiguousExtent).
+// would show: AmbiguousExtent). pairing.pole_tops: a strip between flanks of which one or both end
+// inside goes on past those ends by half its width (a round pole's top; ExtendOverPoleTop).
 void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
                        std::vector<ContourOccluder>* occlusions, ContourPairing pairing = {});
 // Whether a pose hidden in part by a contour occluder goes on past it: an edge that runs from the
