@@ -161,8 +161,10 @@ ContourOccluder Strip(const ImageLine& p, const ImageLine& q) {
 
 // A pole's top: a strip between flanks that end inside a box's image goes on past their ends by half
 // its width (the flanks of a round pole end where its top's ellipse is widest; the ellipse reaches at
-// most its radius beyond). Each side whose contour ends inside (inward: the direction it runs in
-// there, zero for one that does not) is lengthened at that end.
+// most its radius beyond). The strip so lengthened is a rectangle: it hides the ellipse's corners too.
+// Each side with a non-zero `inward` (the direction in which the strip's end lies along it: for a
+// flank that ends inside, the direction it runs in there; for a flank beside the box paired with one
+// that ends inside, that one's) is lengthened at its end that way; a side with zero is left as it is.
 void ExtendOverPoleTop(ContourOccluder* o, const std::array<Eigen::Vector2d, 2>& inward, double by_px) {
   for (int k = 0; k < 2; ++k) {
     ContourOccluder::Side& side = o->sides[static_cast<size_t>(k)];
@@ -294,7 +296,8 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
       }
       out.push_back(Strip(p, q));
       if (pairing.pole_tops && !across) {
-        ExtendOverPoleTop(&out.back(), {inward(into), inward(into)}, 0.25 * (std::abs(qa) + std::abs(qb)));
+        const Eigen::Vector2d in = inward(into);
+        ExtendOverPoleTop(&out.back(), {in, in}, 0.25 * (std::abs(qa) + std::abs(qb)));
       }
     }
   }

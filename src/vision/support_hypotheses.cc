@@ -115,9 +115,11 @@ double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& cam
   // longer per image for 14 more blocks in 3900 images; docs/benchmarks.md, sessions 38 and 42).
   ContourOcclusions(contours, BoxImage(px, visible), &occlusions,
                     {.ends_inside = options.contour_pole_ends && options.support_pole_ends,
+                     // measured: no block changed (RecognizerOptions::contour_across_beside)
                      .across_beside = false,
-                     .pole_tops = options.contour_pole_tops});  // measured: no block changed
-                                                                // (RecognizerOptions::contour_across_beside)
+                     // not measured here (support_pole_ends is off by default): the pole's top only
+                     // in the occlusion pass (RecognizerOptions::contour_pole_tops)
+                     .pole_tops = false});
   if (occlusions.empty()) return -1;
   thread_local std::vector<OutlineSample> samples;
   thread_local std::vector<uint8_t> supported;

@@ -95,7 +95,11 @@ TEST(ContoursTest, APoleTopHidesHalfTheStripsWidthPastTheFlanksEnds) {
   ASSERT_EQ(ways.size(), 1u);
   EXPECT_TRUE(ways[0].Hides({255, 240}));
   EXPECT_TRUE(ways[0].Hides({255, 208}));   // 12 px past the ends: under the top
-  EXPECT_FALSE(ways[0].Hides({255, 198}));  // 22 px past: beyond it
+  EXPECT_TRUE(ways[0].Hides({255, 204}));   // 16 px: half the width (15 px) and the end's slack (3 px)
+  EXPECT_FALSE(ways[0].Hides({255, 200}));  // 20 px: beyond it
+  EXPECT_FALSE(ways[0].Hides({255, 198}));
+  EXPECT_TRUE(ways[0].Hides({255, 400}));  // the flanks' outer ends: not lengthened
+  EXPECT_FALSE(ways[0].Hides({255, 406}));
   EXPECT_FALSE(ways[0].Hides({225, 208}));
   EXPECT_FALSE(ways[0].Hides({285, 208}));
   // The same flanks drawn from their inner ends (a lighter pole on a darker ground): the same top.
@@ -407,7 +411,6 @@ TEST(ContoursTest, APlacementBesideAPoleWhoseTopIsInFrontNeedsSupportPoleEnds) {
                 cv::Point(static_cast<int>(centre - half), static_cast<int>(top + 0.3 * (bottom - top))),
                 cv::Point(static_cast<int>(centre + half), image.rows - 1), cv::Scalar(20), cv::FILLED);
   RecognizerOptions options;
-  options.contour_pole_tops = false;  // this pole's top is square: no round top past its flanks
   const LineDetection detection = DetectLinesAndEdges(image, camera, options);
   const std::vector<ImageLine> contours = OccludingContours(detection, camera, options);
   const std::vector<ImageCorner> corners = FindCorners(detection.lines, options);

@@ -337,7 +337,8 @@ std::optional<vision::FitResult> RefineWithFit(const Eigen::Vector3d& size, cons
 }
 
 // TEACHSIM_RECOGNIZE_DUMP=DIR: each image with a missed block or a false detection (every image with
-// TEACHSIM_RECOGNIZE_DUMP_ALL=1), as DIR/NAME.png
+// TEACHSIM_RECOGNIZE_DUMP_ALL=1), as DIR/NAME.png (a render's NAME holds its seed's folder:
+// DIR/seed8/render_13.png)
 // with the detected segments (yellow), the truth's visible edges (green), found recognitions (blue)
 // and false ones (red), its Canny edges as DIR/NAME.edges.png, and each missed block close up
 // (below).
@@ -385,11 +386,11 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
                                              ? c.name.substr(0, c.name.size() - 4)
                                              : c.name);
   // A render's name holds its seed's folder ("seed8/render_13"): made here.
-  std::error_code made;
-  std::filesystem::create_directories(std::filesystem::path(stem).parent_path(), made);
-  if (made) {
+  std::error_code ec;
+  std::filesystem::create_directories(std::filesystem::path(stem).parent_path(), ec);
+  if (ec) {
     std::fprintf(stderr, "teachsim: warning: cannot create the dump folder for %s: %s\n", stem.c_str(),
-                 made.message().c_str());
+                 ec.message().c_str());
     return;
   }
   cv::imwrite(stem + ".png", out);
@@ -912,7 +913,7 @@ int Run(const BenchArgs& args) {
                          vision::ProjectFixedEdges(&fixed_world, *camera), recognizer->options(), trace);
         }
         if (const char* dump_dir = std::getenv("TEACHSIM_RECOGNIZE_DUMP");
-            evaluation.ok() && dump_dir != nullptr) {
+            evaluation.ok() && dump_dir != nullptr && *dump_dir != '\0') {
           DumpCase(dump_dir, c, *camera, truth->model_sizes_m, detection, recognized->objects, *evaluation,
                    vision::FindCorners(detection.lines, recognizer->options()));
         }

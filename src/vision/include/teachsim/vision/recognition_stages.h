@@ -368,7 +368,8 @@ struct ContourPairing {
 // clear of the box's image), at any distance, the strip on the same side of the step at both (it hides no
 // more than the side of the one across does; what it adds is the far side's bound, past which a longer model
 // would show: AmbiguousExtent). pairing.pole_tops: a strip between flanks of which one or both end
-// inside goes on past those ends by half its width (a round pole's top; ExtendOverPoleTop).
+// inside goes on past those ends by half its width (a round pole's top; ExtendOverPoleTop), the flank
+// beside the box of such a pair lengthened as far that way.
 void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
                        std::vector<ContourOccluder>* occlusions, ContourPairing pairing = {});
 // Whether a pose hidden in part by a contour occluder goes on past it: an edge that runs from the

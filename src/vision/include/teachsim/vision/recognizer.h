@@ -193,11 +193,12 @@ struct RecognizerOptions {
   // 7-71 (3900 images): found 0.4-0.7 visible 345 -> 359, < 0.4 21 -> 22, >= 0.7 11598 -> 11602,
   // false detections 179 -> 181 (docs/benchmarks.md, session 38).
   bool contour_pole_ends = true;
-  // Such a strip goes on past the flanks' ends by half its width: a round pole's top (an ellipse
-  // from where its flanks end, reaching at most its radius beyond) hides that much more. Render
-  // seeds 7-38 (chosen on), against off: found 6096 -> 6102 (7 more, 1 lost), false detections 68 ->
-  // 69; held out, seeds 39-71: 6110 -> 6116 (7 more, 1 lost), 100 -> 101. 0.35 of its width instead:
-  // one block fewer and one false detection fewer in all (docs/benchmarks.md, session 47).
+  // In the occlusion pass, such a strip goes on past the flanks' ends by half its width: a round
+  // pole's top (an ellipse from where its flanks end, reaching at most its radius beyond) hides that
+  // much more. Render seeds 7-38 (chosen on), against off: found 6096 -> 6102 (7 gained, 1 lost),
+  // false detections 68 -> 69; held out, seeds 39-71: 6110 -> 6116 (7 gained, 1 lost), 100 -> 101.
+  // 0.35 of its width instead: one block fewer and one false detection fewer in all
+  // (docs/benchmarks.md, session 47). Not used by the support-plane source (not measured there).
   bool contour_pole_tops = true;
   // The occlusion pass also takes the strip between a contour across the pose's image and one beside
   // it (the far flank of a pole that hides the block's far part; ContourOcclusions). It hides no more
