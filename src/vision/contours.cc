@@ -159,13 +159,14 @@ ContourOccluder Strip(const ImageLine& p, const ImageLine& q) {
   return o;
 }
 
-// A pole's top: a strip between flanks that end inside a box's image goes on past their ends by half
-// its width (the flanks of a round pole end where its top's ellipse is widest; the ellipse reaches at
-// most its radius beyond). The strip so lengthened is a rectangle: it hides the ellipse's corners too.
-// Each side with a non-zero `inward` (the direction in which the strip's end lies along it: for a
-// flank that ends inside, the direction it runs in there; for a flank beside the box paired with one
-// that ends inside, that one's) is lengthened at its end that way; a side with zero is left as it is.
-void ExtendOverPoleTop(ContourOccluder* o, const std::array<Eigen::Vector2d, 2>& inward, double by_px) {
+// A pole's top: a strip `width_px` wide between flanks that end inside a box's image goes on past their
+// ends by half its width (the flanks of a round pole end where its top's ellipse is widest; the ellipse
+// reaches at most its radius beyond). The strip so lengthened is a rectangle: it hides the ellipse's corners
+// too. Each side with a non-zero `inward` (the direction in which the strip's end lies along it: for a flank
+// that ends inside, the direction it runs in there; for a flank beside the box paired with one that ends
+// inside, that one's) is lengthened at its end that way; a side with zero is left as it is.
+void ExtendOverPoleTop(ContourOccluder* o, const std::array<Eigen::Vector2d, 2>& inward, double width_px) {
+  const double by_px = 0.5 * width_px;
   for (int k = 0; k < 2; ++k) {
     ContourOccluder::Side& side = o->sides[static_cast<size_t>(k)];
     const Eigen::Vector2d& in = inward[static_cast<size_t>(k)];
@@ -258,10 +259,8 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
       const double pa = nq.dot(p.a - q.a), pb = nq.dot(p.b - q.a);
       if (qa * qb <= 0 || pa * pb <= 0) continue;
       out.push_back(Strip(p, q));
-      // Half the strip's width: half the mean distance of q's ends from p's line.
-      if (pairing.pole_tops && (ip != Eigen::Vector2d::Zero() || iq != Eigen::Vector2d::Zero())) {
-        ExtendOverPoleTop(&out.back(), {ip, iq}, 0.25 * (std::abs(qa) + std::abs(qb)));
-      }
+      // The strip's width: the mean distance of q's ends from p's line (two across: no side grows).
+      if (pairing.pole_tops) ExtendOverPoleTop(&out.back(), {ip, iq}, 0.5 * (std::abs(qa) + std::abs(qb)));
     }
   }
   // One that ends inside with a flank beside the box's image (the pole's other side passes the box
@@ -297,7 +296,7 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
       out.push_back(Strip(p, q));
       if (pairing.pole_tops && !across) {
         const Eigen::Vector2d in = inward(into);
-        ExtendOverPoleTop(&out.back(), {in, in}, 0.25 * (std::abs(qa) + std::abs(qb)));
+        ExtendOverPoleTop(&out.back(), {in, in}, 0.5 * (std::abs(qa) + std::abs(qb)));
       }
     }
   }
