@@ -493,4 +493,74 @@ json::Json SummaryToJson(const Summary& s) {
           {"slowest_image", slowest}};
 }
 
+Status PairedBuilder::Add(const ImageEvaluation& a, const ImageEvaluation& b) {
+  if (a.objects.size() != b.objects.size()) {
+    return Status::InvalidInput("PairedBuilder: the evaluations score " + std::to_string(a.objects.size()) +
+                                " and " + std::to_string(b.objects.size()) + " truth objects");
+  }
+  for (size_t i = 0; i < a.objects.size(); ++i) {
+    const ObjectOutcome &x = a.objects[i], &y = b.objects[i];
+    if (x.truth != y.truth) {
+      return Status::InvalidInput("PairedBuilder: scored object " + std::to_string(i) + " is truth object " +
+                                  std::to_string(x.truth) + " in one evaluation and " +
+                                  std::to_string(y.truth) + " in the other");
+    }
+    if (x.detection < 0 || y.detection < 0) continue;
+    ++counts_.objects;
+    for (auto [o, f] : {std::pair{&x, &a_}, std::pair{&y, &b_}}) {
+      f->rotation_deg.push_back(o->rotation_error_rad * kRadToDeg);
+      f->across_mm.push_back(o->position_error.across_m * 1e3);
+      f->along_mm.push_back(o->position_error.along_m * 1e3);
+      f->rms_px.push_back(o->reprojection_rms_px);
+      f->truth_projection_px.push_back(o->truth_projection_rms_px);
+    }
+    // Which one is smaller; NaN compares false both ways and counts for neither.
+    auto tally = [](double u, double v, int* u_smaller, int* v_smaller) {
+      *u_smaller += u < v ? 1 : 0;
+      *v_smaller += v < u ? 1 : 0;
+    };
+    tally(x.rotation_error_rad, y.rotation_error_rad, &counts_.a_smaller_rotation,
+          &counts_.b_smaller_rotation);
+    tally(x.reprojection_rms_px, y.reprojection_rms_px, &counts_.a_smaller_reprojection,
+          &counts_.b_smaller_reprojection);
+    tally(x.truth_projection_rms_px, y.truth_projection_rms_px, &counts_.a_smaller_truth_projection,
+          &counts_.b_smaller_truth_projection);
+  }
+  return Status::Ok();
+}
+
+PairedSummary PairedBuilder::Build() const {
+  PairedSummary s = counts_;
+  for (auto [f, out] : {std::pair{&a_, &s.a}, std::pair{&b_, &s.b}}) {
+    out->rotation_deg = Summarize(f->rotation_deg);
+    out->across_mm = Summarize(f->across_mm);
+    out->along_mm = Summarize(f->along_mm);
+    out->reprojection_rms_px = Summarize(f->rms_px);
+    out->truth_projection_rms_px = Summarize(f->truth_projection_px);
+  }
+  return s;
+}
+
+json::Json PairedSummaryToJson(const PairedSummary& s) {
+  auto figures = [](const PairedFigures& f) {
+    return json::Json{{"rotation_error_deg", StatsToJson(f.rotation_deg)},
+                      {"position_error_across_mm", StatsToJson(f.across_mm)},
+                      {"position_error_along_mm", StatsToJson(f.along_mm)},
+                      {"reprojection_rms_px", StatsToJson(f.reprojection_rms_px)},
+                      {"truth_projection_rms_px", StatsToJson(f.truth_projection_rms_px)}};
+  };
+  auto smaller = [](int rotation, int reprojection, int truth_projection) {
+    return json::Json{{"rotation_error_deg", rotation},
+                      {"reprojection_rms_px", reprojection},
+                      {"truth_projection_rms_px", truth_projection}};
+  };
+  return {{"objects", s.objects},
+          {"first", figures(s.a)},
+          {"second", figures(s.b)},
+          {"first_smaller",
+           smaller(s.a_smaller_rotation, s.a_smaller_reprojection, s.a_smaller_truth_projection)},
+          {"second_smaller",
+           smaller(s.b_smaller_rotation, s.b_smaller_reprojection, s.b_smaller_truth_projection)}};
+}
+
 }  // namespace teachsim::vision

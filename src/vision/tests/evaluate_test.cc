@@ -332,6 +332,78 @@ TEST(SummaryTest, TimesAreSummarizedPerStageWithTheSlowestImageNamed) {
   EXPECT_EQ(none["images_over_time_goal"], 0);
 }
 
+// A method that finds one easy block precisely can have smaller medians than one that finds every
+// block: on the blocks both found the figures compare the same blocks, and each method's count of
+// blocks where its figure is the smaller shows who wins block by block.
+TEST(PairedSummaryTest, ComparesOnlyTheObjectsBothMethodsFound) {
+  auto outcome = [](int truth, int detection, double rotation_deg, double rms_px, double off_px) {
+    ObjectOutcome o;
+    o.truth = truth;
+    o.detection = detection;
+    o.visible_fraction = 1;
+    o.rotation_error_rad = rotation_deg * kDeg;
+    o.position_error.across_m = 1e-3 * (truth + 1);
+    o.reprojection_rms_px = rms_px;
+    o.truth_projection_rms_px = off_px;
+    return o;
+  };
+  ImageEvaluation first, second;
+  // Truth 0: both found it, the first more precisely; truth 1: both, the second closer to the
+  // truth; truth 2: only the first found it (its large errors must not enter); truth 3: only the
+  // second; truth 4: both, the second's residual unreported (NaN).
+  first.objects = {outcome(0, 0, 0.1, 0.3, 0.2), outcome(1, 1, 0.4, 0.5, 0.6), outcome(2, 2, 9.0, 4.0, 9.0),
+                   outcome(3, -1, 0, 0, 0), outcome(4, 3, 0.2, 0.4, 0.3)};
+  second.objects = {outcome(0, 0, 0.3, 0.6, 0.5), outcome(1, 2, 0.2, 0.1, 0.1), outcome(2, -1, 0, 0, 0),
+                    outcome(3, 1, 0.01, 0.01, 0.01), outcome(4, 3, 0.2, std::nan(""), 0.4)};
+  PairedBuilder builder;
+  ASSERT_TRUE(builder.Add(first, second).ok());
+  const PairedSummary s = builder.Build();
+  EXPECT_EQ(s.objects, 3);
+  EXPECT_EQ(s.a.rotation_deg.count, 3);
+  EXPECT_NEAR(s.a.rotation_deg.median, 0.2, 1e-9);
+  EXPECT_NEAR(s.b.rotation_deg.median, 0.2, 1e-9);
+  EXPECT_NEAR(s.a.rotation_deg.max, 0.4, 1e-9);  // truth 2's 9 deg left out
+  EXPECT_EQ(s.b.reprojection_rms_px.count, 2);   // the NaN left out
+  EXPECT_DOUBLE_EQ(s.a.across_mm.max, 5.0);      // truth 4's, in mm
+  EXPECT_EQ(s.a_smaller_rotation, 1);            // truth 0; truth 4 is a tie
+  EXPECT_EQ(s.b_smaller_rotation, 1);            // truth 1
+  EXPECT_EQ(s.a_smaller_reprojection, 1);
+  EXPECT_EQ(s.b_smaller_reprojection, 1);  // truth 4 counts for neither
+  EXPECT_EQ(s.a_smaller_truth_projection, 2);
+  EXPECT_EQ(s.b_smaller_truth_projection, 1);
+  const json::Json j = PairedSummaryToJson(s);
+  EXPECT_EQ(j["objects"], 3);
+  EXPECT_NEAR(j["first"]["truth_projection_rms_px"]["median"].get<double>(), 0.3, 1e-9);
+  EXPECT_NEAR(j["second"]["truth_projection_rms_px"]["median"].get<double>(), 0.4, 1e-9);
+  EXPECT_EQ(j["first_smaller"]["truth_projection_rms_px"], 2);
+  EXPECT_EQ(j["second_smaller"]["reprojection_rms_px"], 1);
+  // Nothing found by both: no figures (null medians), no error.
+  const json::Json none = PairedSummaryToJson(PairedBuilder().Build());
+  EXPECT_EQ(none["objects"], 0);
+  EXPECT_TRUE(none["first"]["rotation_error_deg"]["median"].is_null());
+}
+
+// Evaluations of different truth lists cannot be paired: the error says how they differ.
+TEST(PairedSummaryTest, EvaluationsOfOtherObjectsAreRefused) {
+  ImageEvaluation a, b;
+  a.objects.resize(2);
+  b.objects.resize(1);
+  PairedBuilder builder;
+  const Status count = builder.Add(a, b);
+  ASSERT_FALSE(count.ok());
+  EXPECT_NE(count.message().find("2 and 1 truth objects"), std::string::npos) << count.message();
+  a.objects[0].truth = 0;
+  a.objects[1].truth = 2;
+  b.objects = {a.objects[0], a.objects[1]};
+  b.objects[1].truth = 1;
+  const Status order = builder.Add(a, b);
+  ASSERT_FALSE(order.ok());
+  EXPECT_NE(order.message().find("scored object 1 is truth object 2 in one evaluation and 1"),
+            std::string::npos)
+      << order.message();
+  EXPECT_EQ(builder.Build().objects, 0);
+}
+
 TEST(SummarizeTest, NearestRankQuantiles) {
   const Stats s = Summarize({5, 1, 4, 2, 3, 6, 7, 8, 9, 10, std::nan("")});
   EXPECT_EQ(s.count, 10);

@@ -8,7 +8,9 @@
 // per image, position error across / along the line of sight, symmetry-aware rotation error,
 // reprojection RMS (the fit's residual, as each method reports it), the pose's projection error
 // against the truth (vision::SymmetricProjectionRms: every method's, LINE-MOD's raw poses too) and
-// time per image (thread CPU time, one OpenCV thread). --render-seeds: the
+// time per image (thread CPU time, one OpenCV thread); and, since each method's medians are over the
+// blocks it found, each peer's pose figures beside teachsim's on the blocks both found
+// (vision::PairedBuilder; "paired_with_teachsim" in the JSON). --render-seeds: the
 // renders of each seed (60 scenes; default 7), several pooled into one data set; --no-peer: teachsim
 // alone (LINE-MOD's templates not even made).
 // Environment: TEACHSIM_HOME (repository), TEACHSIM_SHARED (../shared), TEACHSIM_CACHE_DIR
@@ -659,9 +661,12 @@ Result<RecognizeArgs> ParseRecognizeArgs(const std::vector<std::string>& extra) 
 
 const char* const kMethods[] = {"teachsim", "teachsim_raw_pose", "linemod", "linemod_fit"};
 constexpr int kMethodCount = 4;
+constexpr int kFirstPeer = 2;  // the methods from here on are the peer's
 
 struct DataSetResult {
   vision::SummaryBuilder builders[kMethodCount];
+  // Each peer (linemod, linemod_fit) against teachsim on the blocks both found; [0] and [1] unused.
+  vision::PairedBuilder paired[kMethodCount];
   int errors[kMethodCount] = {0, 0, 0, 0};
   int bins[3] = {0, 0, 0};
   int losses[3][vision::kLossStages] = {};  // teachsim: per bin, objects by the stage that lost them
@@ -1037,6 +1042,7 @@ int Run(const BenchArgs& args) {
       }
       time_ms[3] = time_ms[2] + ThreadCpuMs() - cpu;
 
+      std::optional<vision::ImageEvaluation> evaluations[kMethodCount];
       for (int m = 0; m < method_count; ++m) {
         if (failed[m]) {
           ++result.errors[m];
@@ -1050,6 +1056,14 @@ int Run(const BenchArgs& args) {
         }
         result.builders[m].Add(*evaluation,
                                m <= 1 ? recognized_time : vision::ImageTime{time_ms[m], c.name, {}, {}});
+        evaluations[m] = std::move(*evaluation);
+      }
+      for (int m = kFirstPeer; m < method_count; ++m) {
+        if (!evaluations[0] || !evaluations[m]) continue;
+        if (const Status paired = result.paired[m].Add(*evaluations[0], *evaluations[m]); !paired.ok()) {
+          std::fprintf(stderr, "teachsim: error: %s: %s\n", c.name.c_str(), paired.message().c_str());
+          return 1;
+        }
       }
     }
     return 0;
@@ -1096,6 +1110,9 @@ int Run(const BenchArgs& args) {
     for (int m = 0; m < method_count; ++m) {
       json::Json summary = vision::SummaryToJson(results[s].builders[m].Build());
       summary["failed_images"] = results[s].errors[m];
+      // A peer's pose figures beside teachsim's on the blocks both found ("first": teachsim's).
+      if (m >= kFirstPeer)
+        summary["paired_with_teachsim"] = vision::PairedSummaryToJson(results[s].paired[m].Build());
       methods[kMethods[m]] = summary;
     }
     json::Json losses = json::Json::object();
@@ -1212,6 +1229,24 @@ int Run(const BenchArgs& args) {
       return std::to_string(j["images_over_time_goal"].get<int>()) + " / " +
              std::to_string(j["images"].get<int>());
     });
+    // Each method's own medians above are over the blocks it found; on the blocks both found, the
+    // pose figures compare like with like.
+    for (int m = kFirstPeer; m < method_count; ++m) {
+      const json::Json& paired = set["methods"][kMethods[m]]["paired_with_teachsim"];
+      std::printf(
+          "  on the %d blocks teachsim and %s both found, median teachsim / %s (blocks where each is "
+          "smaller):\n",
+          paired["objects"].get<int>(), kMethods[m], kMethods[m]);
+      for (const auto& [key, label] :
+           std::vector<std::pair<const char*, const char*>>{{"rotation_error_deg", "rotation deg"},
+                                                            {"reprojection_rms_px", "reprojection px"},
+                                                            {"truth_projection_rms_px", "off truth px"}}) {
+        std::printf("    %-16s %s / %s (%d / %d)\n", label,
+                    number(paired["first"][key]["median"], "%.2f").c_str(),
+                    number(paired["second"][key]["median"], "%.2f").c_str(),
+                    paired["first_smaller"][key].get<int>(), paired["second_smaller"][key].get<int>());
+      }
+    }
     // Where the recognizer's time goes, on the mean image and on the slowest one.
     const json::Json& ours = set["methods"]["teachsim"];
     if (!ours["stage_time_ms"].empty()) {

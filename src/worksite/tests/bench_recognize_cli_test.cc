@@ -1,10 +1,12 @@
 // `teachsim bench recognize` from the command line: several render seeds pooled into one data set
-// (the figures are the sums of the seeds' own), teachsim alone without the peer, and bad arguments
-// answered with exit status 2 and a message naming them. Skipped where the benchmarks are not built
+// (the figures are the sums of the seeds' own), teachsim alone without the peer, the peer compared
+// with teachsim on the blocks both found, and bad arguments answered with exit status 2 and a
+// message naming them. Skipped where the benchmarks are not built
 // (the sanitizer build) or the dev set is missing.
 #include <gtest/gtest.h>
 #include <stdlib.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <string>
 
@@ -118,6 +120,52 @@ TEST_F(BenchRecognizeCliTest, SeveralRenderSeedsArePooledIntoOneDataSet) {
   // The dev set is measured once, whatever the seeds.
   EXPECT_EQ(pooled["data_sets"][0]["methods"]["teachsim"]["recall"],
             three["data_sets"][0]["methods"]["teachsim"]["recall"]);
+}
+
+// With the peer, each of its methods is compared with teachsim on the blocks both found (render seed 4
+// has one such block in --quick): the pairs are no more than either found, each figure is counted on
+// every pair, and no block is won by both.
+TEST_F(BenchRecognizeCliTest, EachPeerIsComparedWithTeachsimOnTheBlocksBothFound) {
+  const CommandRun run = Teachsim("bench recognize --quick --json --render-seeds 4");
+  ASSERT_EQ(run.status, 0) << run.err;
+  auto document = json::ParseText(run.out, "bench output");
+  ASSERT_TRUE(document.ok()) << document.status().message();
+  EXPECT_EQ((*document)["peer"], true);
+  int pairs = 0;
+  for (const json::Json& set : (*document)["data_sets"]) {
+    const json::Json& methods = set["methods"];
+    auto found = [](const json::Json& method) {
+      int n = 0;
+      for (const auto& [bin, figures] : method["recall"].items()) n += figures["found"].get<int>();
+      return n;
+    };
+    EXPECT_FALSE(methods["teachsim"].contains("paired_with_teachsim"));
+    for (const char* peer : {"linemod", "linemod_fit"}) {
+      ASSERT_TRUE(methods[peer].contains("paired_with_teachsim")) << set["name"] << " " << peer;
+      const json::Json& paired = methods[peer]["paired_with_teachsim"];
+      const int objects = paired["objects"].get<int>();
+      pairs += objects;
+      EXPECT_LE(objects, std::min(found(methods["teachsim"]), found(methods[peer]))) << paired;
+      for (const char* side : {"first", "second"}) {
+        EXPECT_EQ(paired[side]["rotation_error_deg"]["count"].get<int>(), objects) << paired;
+        EXPECT_EQ(paired[side]["truth_projection_rms_px"]["count"].get<int>(), objects) << paired;
+      }
+      for (const char* figure : {"rotation_error_deg", "reprojection_rms_px", "truth_projection_rms_px"}) {
+        EXPECT_LE(paired["first_smaller"][figure].get<int>() + paired["second_smaller"][figure].get<int>(),
+                  objects)
+            << paired;
+      }
+      // LINE-MOD's raw poses report no residual: none of its pairs has one.
+      if (std::string(peer) == "linemod") {
+        EXPECT_EQ(paired["second"]["reprojection_rms_px"]["count"].get<int>(), 0);
+      }
+    }
+  }
+  EXPECT_GT(pairs, 0);
+  // The table names the comparison.
+  const CommandRun table = Teachsim("bench recognize --quick --render-seeds 4");
+  ASSERT_EQ(table.status, 0) << table.err;
+  EXPECT_NE(table.out.find("blocks teachsim and linemod_fit both found"), std::string::npos) << table.out;
 }
 
 TEST_F(BenchRecognizeCliTest, BadArgumentsAreNamed) {

@@ -236,4 +236,41 @@ class SummaryBuilder {
 
 json::Json SummaryToJson(const Summary& summary);
 
+// --- Paired comparison ---------------------------------------------------------------------------
+
+// Two methods' pose figures on the objects that both found. Each method's own medians are taken
+// over the objects it found, and a method that finds few objects, only the easy ones, can look
+// more precise than one that finds many; on the same objects the figures compare like with like.
+struct PairedFigures {
+  Stats rotation_deg, across_mm, along_mm, reprojection_rms_px, truth_projection_rms_px;
+};
+struct PairedSummary {
+  int objects = 0;     // found by both
+  PairedFigures a, b;  // the first method's figures on them, the second's
+  // Objects on which the first method's figure is smaller than the second's, per figure (ties and
+  // objects that lack either figure count for neither).
+  int a_smaller_rotation = 0, a_smaller_reprojection = 0, a_smaller_truth_projection = 0;
+  int b_smaller_rotation = 0, b_smaller_reprojection = 0, b_smaller_truth_projection = 0;
+};
+
+// Collects the pairs over images: add the two methods' evaluations of each image (made against the
+// same truth objects, in the same order).
+class PairedBuilder {
+ public:
+  // Fails when the two evaluations are not of the same truth objects.
+  [[nodiscard]] Status Add(const ImageEvaluation& a, const ImageEvaluation& b);
+  PairedSummary Build() const;
+
+ private:
+  struct Figures {
+    std::vector<double> rotation_deg, across_mm, along_mm, rms_px, truth_projection_px;
+  };
+  PairedSummary counts_;
+  Figures a_, b_;
+};
+
+// {"objects", "first": figures, "second": figures, "first_smaller": counts, "second_smaller": counts};
+// the figures as SummaryToJson names them.
+json::Json PairedSummaryToJson(const PairedSummary& summary);
+
 }  // namespace teachsim::vision
