@@ -117,6 +117,8 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(fraction("contour_min_shown_share", contour_min_shown_share));
   TEACHSIM_RETURN_IF_ERROR(fraction("contour_low_shown_share", contour_low_shown_share));
   TEACHSIM_RETURN_IF_ERROR(fraction("contour_low_shown_score", contour_low_shown_score));
+  TEACHSIM_RETURN_IF_ERROR(fraction("contour_bare_max_coverage", contour_bare_max_coverage));
+  TEACHSIM_RETURN_IF_ERROR(fraction("contour_bare_min_evidence_score", contour_bare_min_evidence_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("matched_share_rescue_score", matched_share_rescue_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_score", min_score));
   TEACHSIM_RETURN_IF_ERROR(fraction("min_coverage", min_coverage));
@@ -1602,7 +1604,8 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
   // `free_matches`: the pose's matches among the free lines, found on the first call for the pose
   // (they do not depend on what hides it).
   auto judge_hidden = [&](const Rejected& r, const Hiding& hiding, double hidden,
-                          std::optional<EdgeMatchSet>* free_matches) -> std::optional<Candidate> {
+                          std::optional<EdgeMatchSet>* free_matches,
+                          double min_score) -> std::optional<Candidate> {
     const Model& model = models_.models[static_cast<size_t>(r.model)];
     const geometry::Pose3& pose = r.fit.camera_T_object;
     if (!*free_matches) {
@@ -1620,7 +1623,7 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
     double rms_px = 0;
     const Outcome verdict = Judge(evidence, options_, &rms_px);
     const double score = EvidenceScore(evidence);
-    if (verdict != Outcome::kCandidate || score < options_.occlusion_min_evidence_score) return std::nullopt;
+    if (verdict != Outcome::kCandidate || score < min_score) return std::nullopt;
     Candidate c;
     c.trace_index = r.trace_index;
     c.model = r.model;
@@ -1668,7 +1671,7 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
       hiding.boxes = &in_front;
       const double hidden = hidden_outline(hiding).share;
       if (hidden >= options_.occlusion_min_hidden_share && 1 - hidden >= options_.occlusion_min_shown_share) {
-        best = judge_hidden(r, hiding, hidden, &free_matches);
+        best = judge_hidden(r, hiding, hidden, &free_matches, options_.occlusion_min_evidence_score);
       }
     }
     if (!best && !contours.empty() && extent.valid) {
@@ -1691,7 +1694,8 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
             hidden.coverage > options_.contour_max_hidden_coverage) {
           continue;
         }
-        std::optional<Candidate> c = judge_hidden(r, hiding, hidden.share, &free_matches);
+        std::optional<Candidate> c = judge_hidden(r, hiding, hidden.share, &free_matches,
+                                                  options_.ContourMinEvidenceScore(hidden.coverage));
         // Less than contour_min_shown_share in view: only with the higher evidence score.
         if (c && shown < options_.contour_min_shown_share &&
             c->rank_score < options_.contour_low_shown_score) {

@@ -552,6 +552,9 @@ TEST(OptionsTest, ValidateNamesTheField) {
       {"contour_min_shown_share", [](RecognizerOptions& r) { r.contour_min_shown_share = -0.5; }},
       {"contour_low_shown_share", [](RecognizerOptions& r) { r.contour_low_shown_share = 1.5; }},
       {"contour_low_shown_score", [](RecognizerOptions& r) { r.contour_low_shown_score = -0.1; }},
+      {"contour_bare_max_coverage", [](RecognizerOptions& r) { r.contour_bare_max_coverage = -0.1; }},
+      {"contour_bare_min_evidence_score",
+       [](RecognizerOptions& r) { r.contour_bare_min_evidence_score = 1.5; }},
       {"ladder_search_m", [](RecognizerOptions& r) { r.ladder_search_m = -0.01; }},
       {"ladder_step_m", [](RecognizerOptions& r) { r.ladder_search_m = 0.012, r.ladder_step_m = 0; }},
       {"ladder_margin", [](RecognizerOptions& r) { r.ladder_margin = -1; }},
@@ -1570,6 +1573,36 @@ TEST(OcclusionTest, ACubeWhoseFarPartAPoleHidesIsFoundInTheStripBetweenThePolesS
   DrawPole(&image, lo + 0.5 * (hi - lo), hi + 0.3 * (hi - lo));
   ExpectFoundOnlyWith(
       image, [](RecognizerOptions* o, bool on) { o->contour_across_beside = on; }, Cube(), cube_pose);
+}
+
+// The cube whose far part a pole hides, asked for an evidence score no pose reaches
+// (occlusion_min_evidence_score 1): its hidden outline lies on the uniform pole and shows no edge, so
+// with a lower score for such a bare hidden outline (contour_bare_min_evidence_score) it is found at
+// its pose; without (1), it is not.
+TEST(OcclusionTest, AHiddenOutlineBareOfEdgesNeedsOnlyTheLowerScore) {
+  const Camera camera = SyntheticCamera();
+  const geometry::Pose3 cube_pose = OnTable(Cube().box_size_m, 0, 0, 0.86);
+  cv::Mat image = RenderBoxes(camera, {{Cube().box_size_m, cube_pose}}, 7);
+  const auto [lo, hi] = ImageXSpan(camera, Cube(), cube_pose);
+  DrawPole(&image, lo + 0.5 * (hi - lo), hi + 0.3 * (hi - lo));
+  ExpectFoundOnlyWith(
+      image,
+      [](RecognizerOptions* o, bool on) {
+        o->occlusion_min_evidence_score = 1;
+        o->contour_bare_min_evidence_score = on ? 0.9 : 1;
+      },
+      Cube(), cube_pose);
+  // Which score: the lower one up to contour_bare_max_coverage of the hidden samples supported, and
+  // never above occlusion_min_evidence_score.
+  RecognizerOptions options;
+  options.occlusion_min_evidence_score = 0.98;
+  options.contour_bare_min_evidence_score = 0.93;
+  options.contour_bare_max_coverage = 0.02;
+  EXPECT_DOUBLE_EQ(options.ContourMinEvidenceScore(0), 0.93);
+  EXPECT_DOUBLE_EQ(options.ContourMinEvidenceScore(0.02), 0.93);
+  EXPECT_DOUBLE_EQ(options.ContourMinEvidenceScore(0.021), 0.98);
+  options.contour_bare_min_evidence_score = 0.99;
+  EXPECT_DOUBLE_EQ(options.ContourMinEvidenceScore(0), 0.98);
 }
 
 // A block in front with grain on its faces along the hidden edges of a block behind it: the grain is a

@@ -571,6 +571,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"hiddenscore", [o](double v) { o->occlusion_min_evidence_score = v; }},
       {"contourlen", [o](double v) { o->contour_min_length_px = v; }},
       {"contourcover", [o](double v) { o->contour_max_hidden_coverage = v; }},
+      {"barescore", [o](double v) { o->contour_bare_min_evidence_score = v; }},
+      {"barecover", [o](double v) { o->contour_bare_max_coverage = v; }},
       {"contourstep", [o](double v) { o->contour_min_step_grey = v; }},
       {"contourshown", [o](double v) { o->contour_min_shown_share = v; }},
       {"contourlowshown", [o](double v) { o->contour_low_shown_share = v; }},
@@ -606,7 +608,9 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "neighbours-N, queries-N, matched-X, supportmin-X, cornerridge-X, cornerridgegrey-GREY, "
            "cornerridgecorners-N, seglen-PX, junction-PX, stepshare-X, "
            "stepgrey-X, stepoffset-PX, alternatives-N, permodel-N, matchedinimage-X, refitrms-PX, "
-           "refitcoverage-X, refitscore-X, contourlen-PX, contourcover-X, contourstep-GREY, contourshown-X, "
+           "refitcoverage-X, refitscore-X, contourlen-PX, contourcover-X, barescore-X, barecover-X, "
+           "contourstep-GREY, "
+           "contourshown-X, "
            "contourlowshown-X, contourlowscore-X, ladder-MM, laddermargin-X, ladderscore-X, "
            "laddercoverage-X, "
            "refitinimage-X, "
