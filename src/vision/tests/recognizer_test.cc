@@ -1564,15 +1564,20 @@ TEST(OcclusionTest, ABarWhoseMiddleAnUnknownPoleHidesIsFoundBesideItsContours) {
 // cube is not taken (AmbiguousExtent); with the strip between the pole's two sides
 // (RecognizerOptions::contour_across_beside), the bar would show its far end past the pole, and the
 // cube is found at its pose.
-TEST(OcclusionTest, ACubeWhoseFarPartAPoleHidesIsFoundInTheStripBetweenThePolesSides) {
-  const Camera camera = SyntheticCamera();
-  const geometry::Pose3 cube_pose = OnTable(Cube().box_size_m, 0, 0, 0.86);
-  cv::Mat image = RenderBoxes(camera, {{Cube().box_size_m, cube_pose}}, 7);
-  // The pole from the middle of the cube's image to 0.3 of its width past it.
-  const auto [lo, hi] = ImageXSpan(camera, Cube(), cube_pose);
+// The cube on the table at (0, 0) with a dark pole from the middle of its image to 0.3 of its width
+// past it.
+cv::Mat CubeWithItsFarPartBehindAPole(const geometry::Pose3& cube_pose) {
+  cv::Mat image = RenderBoxes(SyntheticCamera(), {{Cube().box_size_m, cube_pose}}, 7);
+  const auto [lo, hi] = ImageXSpan(SyntheticCamera(), Cube(), cube_pose);
   DrawPole(&image, lo + 0.5 * (hi - lo), hi + 0.3 * (hi - lo));
+  return image;
+}
+
+TEST(OcclusionTest, ACubeWhoseFarPartAPoleHidesIsFoundInTheStripBetweenThePolesSides) {
+  const geometry::Pose3 cube_pose = OnTable(Cube().box_size_m, 0, 0, 0.86);
   ExpectFoundOnlyWith(
-      image, [](RecognizerOptions* o, bool on) { o->contour_across_beside = on; }, Cube(), cube_pose);
+      CubeWithItsFarPartBehindAPole(cube_pose),
+      [](RecognizerOptions* o, bool on) { o->contour_across_beside = on; }, Cube(), cube_pose);
 }
 
 // The cube whose far part a pole hides, asked for an evidence score no pose reaches
@@ -1580,13 +1585,9 @@ TEST(OcclusionTest, ACubeWhoseFarPartAPoleHidesIsFoundInTheStripBetweenThePolesS
 // with a lower score for such a bare hidden outline (contour_bare_min_evidence_score) it is found at
 // its pose; without (1), it is not.
 TEST(OcclusionTest, AHiddenOutlineBareOfEdgesNeedsOnlyTheLowerScore) {
-  const Camera camera = SyntheticCamera();
   const geometry::Pose3 cube_pose = OnTable(Cube().box_size_m, 0, 0, 0.86);
-  cv::Mat image = RenderBoxes(camera, {{Cube().box_size_m, cube_pose}}, 7);
-  const auto [lo, hi] = ImageXSpan(camera, Cube(), cube_pose);
-  DrawPole(&image, lo + 0.5 * (hi - lo), hi + 0.3 * (hi - lo));
   ExpectFoundOnlyWith(
-      image,
+      CubeWithItsFarPartBehindAPole(cube_pose),
       [](RecognizerOptions* o, bool on) {
         o->occlusion_min_evidence_score = 1;
         o->contour_bare_min_evidence_score = on ? 0.9 : 1;
