@@ -498,13 +498,16 @@ Status PairedBuilder::Add(const ImageEvaluation& a, const ImageEvaluation& b) {
     return Status::InvalidInput("PairedBuilder: the evaluations score " + std::to_string(a.objects.size()) +
                                 " and " + std::to_string(b.objects.size()) + " truth objects");
   }
+  // Every pair checked before any is added: a refused image leaves the figures as they were.
+  for (size_t i = 0; i < a.objects.size(); ++i) {
+    if (a.objects[i].truth != b.objects[i].truth) {
+      return Status::InvalidInput("PairedBuilder: scored object " + std::to_string(i) + " is truth object " +
+                                  std::to_string(a.objects[i].truth) + " in one evaluation and " +
+                                  std::to_string(b.objects[i].truth) + " in the other");
+    }
+  }
   for (size_t i = 0; i < a.objects.size(); ++i) {
     const ObjectOutcome &x = a.objects[i], &y = b.objects[i];
-    if (x.truth != y.truth) {
-      return Status::InvalidInput("PairedBuilder: scored object " + std::to_string(i) + " is truth object " +
-                                  std::to_string(x.truth) + " in one evaluation and " +
-                                  std::to_string(y.truth) + " in the other");
-    }
     if (x.detection < 0 || y.detection < 0) continue;
     ++counts_.objects;
     for (auto [o, f] : {std::pair{&x, &a_}, std::pair{&y, &b_}}) {
@@ -541,7 +544,7 @@ PairedSummary PairedBuilder::Build() const {
   return s;
 }
 
-json::Json PairedSummaryToJson(const PairedSummary& s) {
+json::Json PairedSummaryToJson(const PairedSummary& s, const std::string& first, const std::string& second) {
   auto figures = [](const PairedFigures& f) {
     return json::Json{{"rotation_error_deg", StatsToJson(f.rotation_deg)},
                       {"position_error_across_mm", StatsToJson(f.across_mm)},
@@ -554,13 +557,14 @@ json::Json PairedSummaryToJson(const PairedSummary& s) {
                       {"reprojection_rms_px", reprojection},
                       {"truth_projection_rms_px", truth_projection}};
   };
-  return {{"objects", s.objects},
-          {"first", figures(s.a)},
-          {"second", figures(s.b)},
-          {"first_smaller",
-           smaller(s.a_smaller_rotation, s.a_smaller_reprojection, s.a_smaller_truth_projection)},
-          {"second_smaller",
-           smaller(s.b_smaller_rotation, s.b_smaller_reprojection, s.b_smaller_truth_projection)}};
+  json::Json j = {{"objects", s.objects}};
+  j[first] = figures(s.a);
+  j[second] = figures(s.b);
+  j[first + "_smaller"] =
+      smaller(s.a_smaller_rotation, s.a_smaller_reprojection, s.a_smaller_truth_projection);
+  j[second + "_smaller"] =
+      smaller(s.b_smaller_rotation, s.b_smaller_reprojection, s.b_smaller_truth_projection);
+  return j;
 }
 
 }  // namespace teachsim::vision

@@ -1600,7 +1600,7 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
                                               : OccludingContours(detection_, camera_, options_);
   // A pose judged again with `hiding` leaving out part of its outline (`hidden` of its samples in
   // the image): the matched share over the outline in view, without the lines accepted recognitions
-  // claim; the rules, and the occlusion pass's evidence score.
+  // claim; the rules, and an evidence score of at least `min_score`.
   // `free_matches`: the pose's matches among the free lines, found on the first call for the pose
   // (they do not depend on what hides it).
   auto judge_hidden = [&](const Rejected& r, const Hiding& hiding, double hidden,

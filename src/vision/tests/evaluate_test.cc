@@ -371,19 +371,20 @@ TEST(PairedSummaryTest, ComparesOnlyTheObjectsBothMethodsFound) {
   EXPECT_EQ(s.b_smaller_reprojection, 1);  // truth 4 counts for neither
   EXPECT_EQ(s.a_smaller_truth_projection, 2);
   EXPECT_EQ(s.b_smaller_truth_projection, 1);
-  const json::Json j = PairedSummaryToJson(s);
+  const json::Json j = PairedSummaryToJson(s, "ours", "theirs");
   EXPECT_EQ(j["objects"], 3);
-  EXPECT_NEAR(j["first"]["truth_projection_rms_px"]["median"].get<double>(), 0.3, 1e-9);
-  EXPECT_NEAR(j["second"]["truth_projection_rms_px"]["median"].get<double>(), 0.4, 1e-9);
-  EXPECT_EQ(j["first_smaller"]["truth_projection_rms_px"], 2);
-  EXPECT_EQ(j["second_smaller"]["reprojection_rms_px"], 1);
+  EXPECT_NEAR(j["ours"]["truth_projection_rms_px"]["median"].get<double>(), 0.3, 1e-9);
+  EXPECT_NEAR(j["theirs"]["truth_projection_rms_px"]["median"].get<double>(), 0.4, 1e-9);
+  EXPECT_EQ(j["ours_smaller"]["truth_projection_rms_px"], 2);
+  EXPECT_EQ(j["theirs_smaller"]["reprojection_rms_px"], 1);
   // Nothing found by both: no figures (null medians), no error.
-  const json::Json none = PairedSummaryToJson(PairedBuilder().Build());
+  const json::Json none = PairedSummaryToJson(PairedBuilder().Build(), "ours", "theirs");
   EXPECT_EQ(none["objects"], 0);
-  EXPECT_TRUE(none["first"]["rotation_error_deg"]["median"].is_null());
+  EXPECT_TRUE(none["ours"]["rotation_error_deg"]["median"].is_null());
 }
 
-// Evaluations of different truth lists cannot be paired: the error says how they differ.
+// Evaluations of different truth lists cannot be paired: the error says how they differ, and the
+// refused image adds nothing, not even the pairs before the one that differs.
 TEST(PairedSummaryTest, EvaluationsOfOtherObjectsAreRefused) {
   ImageEvaluation a, b;
   a.objects.resize(2);
@@ -393,6 +394,7 @@ TEST(PairedSummaryTest, EvaluationsOfOtherObjectsAreRefused) {
   ASSERT_FALSE(count.ok());
   EXPECT_NE(count.message().find("2 and 1 truth objects"), std::string::npos) << count.message();
   a.objects[0].truth = 0;
+  a.objects[0].detection = 0;  // found by both: a pair, were the image taken
   a.objects[1].truth = 2;
   b.objects = {a.objects[0], a.objects[1]};
   b.objects[1].truth = 1;

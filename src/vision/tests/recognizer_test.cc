@@ -1559,13 +1559,7 @@ TEST(OcclusionTest, ABarWhoseMiddleAnUnknownPoleHidesIsFoundBesideItsContours) {
   EXPECT_EQ(result->objects.size(), 0u);
 }
 
-// A cube whose far part a dark pole hides, the pole's near side across the cube's image and its far
-// side beyond it. On the near side alone, a bar laid from the end in view would end hidden too, so the
-// cube is not taken (AmbiguousExtent); with the strip between the pole's two sides
-// (RecognizerOptions::contour_across_beside), the bar would show its far end past the pole, and the
-// cube is found at its pose.
-// The cube on the table at (0, 0) with a dark pole from the middle of its image to 0.3 of its width
-// past it.
+// The cube at `cube_pose` with a dark pole from the middle of its image to 0.3 of its width past it.
 cv::Mat CubeWithItsFarPartBehindAPole(const geometry::Pose3& cube_pose) {
   cv::Mat image = RenderBoxes(SyntheticCamera(), {{Cube().box_size_m, cube_pose}}, 7);
   const auto [lo, hi] = ImageXSpan(SyntheticCamera(), Cube(), cube_pose);
@@ -1573,6 +1567,11 @@ cv::Mat CubeWithItsFarPartBehindAPole(const geometry::Pose3& cube_pose) {
   return image;
 }
 
+// A cube whose far part a dark pole hides, the pole's near side across the cube's image and its far
+// side beyond it. On the near side alone, a bar laid from the end in view would end hidden too, so the
+// cube is not taken (AmbiguousExtent); with the strip between the pole's two sides
+// (RecognizerOptions::contour_across_beside), the bar would show its far end past the pole, and the
+// cube is found at its pose.
 TEST(OcclusionTest, ACubeWhoseFarPartAPoleHidesIsFoundInTheStripBetweenThePolesSides) {
   const geometry::Pose3 cube_pose = OnTable(Cube().box_size_m, 0, 0, 0.86);
   ExpectFoundOnlyWith(

@@ -45,7 +45,9 @@
 // with their flanks, contour_pole_tops; support-pole-ends: in the
 // support-plane source too, support_pole_ends), no-across-beside (no strips between a contour across
 // a pose's image and one beside it: contour_across_beside), contourlen-PX, contourstep-GREY,
-// contourcover-X and contourshown-X (their limits), contourlowshown-X and contourlowscore-X (more than
+// contourcover-X and contourshown-X (their limits), barescore-X and barecover-X (the lower evidence score
+// behind a contour where the hidden outline shows no edge, and how bare it must be; barescore-1: off),
+// contourlowshown-X and contourlowscore-X (more than
 // half hidden behind a contour: the share in view and the evidence score it needs; contourlowshown-0.5:
 // off), refitrms-PX,
 // refitcoverage-X, refitscore-X, refitinimage-X (the edge-point refit's limits; no-refit switches it off),
@@ -1114,9 +1116,10 @@ int Run(const BenchArgs& args) {
     for (int m = 0; m < method_count; ++m) {
       json::Json summary = vision::SummaryToJson(results[s].builders[m].Build());
       summary["failed_images"] = results[s].errors[m];
-      // A peer's pose figures beside teachsim's on the blocks both found ("first": teachsim's).
+      // A peer's pose figures beside teachsim's on the blocks both found.
       if (m >= kFirstPeer)
-        summary["paired_with_teachsim"] = vision::PairedSummaryToJson(results[s].paired[m].Build());
+        summary["paired_with_teachsim"] =
+            vision::PairedSummaryToJson(results[s].paired[m].Build(), "teachsim", "peer");
       methods[kMethods[m]] = summary;
     }
     json::Json losses = json::Json::object();
@@ -1246,9 +1249,9 @@ int Run(const BenchArgs& args) {
                                                             {"reprojection_rms_px", "reprojection px"},
                                                             {"truth_projection_rms_px", "off truth px"}}) {
         std::printf("    %-16s %s / %s (%d / %d)\n", label,
-                    number(paired["first"][key]["median"], "%.2f").c_str(),
-                    number(paired["second"][key]["median"], "%.2f").c_str(),
-                    paired["first_smaller"][key].get<int>(), paired["second_smaller"][key].get<int>());
+                    number(paired["teachsim"][key]["median"], "%.2f").c_str(),
+                    number(paired["peer"][key]["median"], "%.2f").c_str(),
+                    paired["teachsim_smaller"][key].get<int>(), paired["peer_smaller"][key].get<int>());
       }
     }
     // Where the recognizer's time goes, on the mean image and on the slowest one.

@@ -146,18 +146,18 @@ TEST_F(BenchRecognizeCliTest, EachPeerIsComparedWithTeachsimOnTheBlocksBothFound
       const int objects = paired["objects"].get<int>();
       pairs += objects;
       EXPECT_LE(objects, std::min(found(methods["teachsim"]), found(methods[peer]))) << paired;
-      for (const char* side : {"first", "second"}) {
+      for (const char* side : {"teachsim", "peer"}) {
         EXPECT_EQ(paired[side]["rotation_error_deg"]["count"].get<int>(), objects) << paired;
         EXPECT_EQ(paired[side]["truth_projection_rms_px"]["count"].get<int>(), objects) << paired;
       }
       for (const char* figure : {"rotation_error_deg", "reprojection_rms_px", "truth_projection_rms_px"}) {
-        EXPECT_LE(paired["first_smaller"][figure].get<int>() + paired["second_smaller"][figure].get<int>(),
+        EXPECT_LE(paired["teachsim_smaller"][figure].get<int>() + paired["peer_smaller"][figure].get<int>(),
                   objects)
             << paired;
       }
       // LINE-MOD's raw poses report no residual: none of its pairs has one.
       if (std::string(peer) == "linemod") {
-        EXPECT_EQ(paired["second"]["reprojection_rms_px"]["count"].get<int>(), 0);
+        EXPECT_EQ(paired["peer"]["reprojection_rms_px"]["count"].get<int>(), 0);
       }
     }
   }

@@ -247,8 +247,9 @@ struct PairedFigures {
 struct PairedSummary {
   int objects = 0;     // found by both
   PairedFigures a, b;  // the first method's figures on them, the second's
-  // Objects on which the first method's figure is smaller than the second's, per figure (ties and
-  // objects that lack either figure count for neither).
+  // Objects on which the first method's figure is smaller than the second's, for the rotation
+  // error, the reprojection RMS and the error against the truth's projection (ties and objects that
+  // lack either figure count for neither).
   int a_smaller_rotation = 0, a_smaller_reprojection = 0, a_smaller_truth_projection = 0;
   int b_smaller_rotation = 0, b_smaller_reprojection = 0, b_smaller_truth_projection = 0;
 };
@@ -257,7 +258,7 @@ struct PairedSummary {
 // same truth objects, in the same order).
 class PairedBuilder {
  public:
-  // Fails when the two evaluations are not of the same truth objects.
+  // Fails, adding nothing, when the two evaluations are not of the same truth objects.
   [[nodiscard]] Status Add(const ImageEvaluation& a, const ImageEvaluation& b);
   PairedSummary Build() const;
 
@@ -269,8 +270,9 @@ class PairedBuilder {
   Figures a_, b_;
 };
 
-// {"objects", "first": figures, "second": figures, "first_smaller": counts, "second_smaller": counts};
-// the figures as SummaryToJson names them.
-json::Json PairedSummaryToJson(const PairedSummary& summary);
+// {"objects", FIRST: figures, SECOND: figures, "FIRST_smaller": counts, "SECOND_smaller": counts},
+// with the two methods' names as given (they must differ); the figures as SummaryToJson names them.
+json::Json PairedSummaryToJson(const PairedSummary& summary, const std::string& first,
+                               const std::string& second);
 
 }  // namespace teachsim::vision
