@@ -405,6 +405,19 @@ double Summary::FalsePositivesPerImage() const {
   return images > 0 ? static_cast<double>(false_positives) / images : kNaN;
 }
 
+void PoseSamples::Add(const ObjectOutcome& o) {
+  rotation_deg_.push_back(o.rotation_error_rad * kRadToDeg);
+  across_mm_.push_back(o.position_error.across_m * 1e3);
+  along_mm_.push_back(o.position_error.along_m * 1e3);
+  rms_px_.push_back(o.reprojection_rms_px);
+  truth_projection_px_.push_back(o.truth_projection_rms_px);
+}
+
+PoseFigures PoseSamples::Build() const {
+  return {Summarize(rotation_deg_), Summarize(across_mm_), Summarize(along_mm_), Summarize(rms_px_),
+          Summarize(truth_projection_px_)};
+}
+
 void SummaryBuilder::Add(const ImageEvaluation& evaluation, const ImageTime& time) {
   ++counts_.images;
   counts_.false_positives += evaluation.false_positives;
@@ -420,11 +433,7 @@ void SummaryBuilder::Add(const ImageEvaluation& evaluation, const ImageTime& tim
     if (o.detection < 0) continue;
     ++counts_.found[bin];
     counts_.unoccluded_found += unoccluded ? 1 : 0;
-    rotation_deg_.push_back(o.rotation_error_rad * kRadToDeg);
-    across_mm_.push_back(o.position_error.across_m * 1e3);
-    along_mm_.push_back(o.position_error.along_m * 1e3);
-    rms_px_.push_back(o.reprojection_rms_px);
-    truth_projection_px_.push_back(o.truth_projection_rms_px);
+    poses_.Add(o);
     if (o.rotation_error_rad <= goals_.rotation_rad && o.position_error.across_m <= goals_.across_m &&
         o.position_error.along_m <= goals_.along_m) {
       ++counts_.within_goals;
@@ -434,11 +443,7 @@ void SummaryBuilder::Add(const ImageEvaluation& evaluation, const ImageTime& tim
 
 Summary SummaryBuilder::Build() const {
   Summary s = counts_;
-  s.rotation_deg = Summarize(rotation_deg_);
-  s.across_mm = Summarize(across_mm_);
-  s.along_mm = Summarize(along_mm_);
-  s.reprojection_rms_px = Summarize(rms_px_);
-  s.truth_projection_rms_px = Summarize(truth_projection_px_);
+  s.poses = poses_.Build();
   s.time_ms = Summarize(time_ms_);
   for (const auto& [stage, values] : stage_ms_) s.stage_time_ms[stage] = Summarize(values);
   return s;
@@ -450,6 +455,15 @@ json::Json RecallToJson(int objects, int found, double recall) {
   return {{"objects", objects},
           {"found", found},
           {"recall", std::isfinite(recall) ? json::Json(recall) : json::Json(nullptr)}};
+}
+
+// A set of pose figures under the names both summaries give them in JSON.
+json::Json PoseFiguresToJson(const PoseFigures& f) {
+  return {{"rotation_error_deg", StatsToJson(f.rotation_deg)},
+          {"position_error_across_mm", StatsToJson(f.across_mm)},
+          {"position_error_along_mm", StatsToJson(f.along_mm)},
+          {"reprojection_rms_px", StatsToJson(f.reprojection_rms_px)},
+          {"truth_projection_rms_px", StatsToJson(f.truth_projection_rms_px)}};
 }
 }  // namespace
 
@@ -472,25 +486,22 @@ json::Json SummaryToJson(const Summary& s) {
     slowest = {
         {"image", s.slowest->image}, {"ms", s.slowest->total_ms}, {"stage_ms", stage_ms}, {"counts", counts}};
   }
-  return {{"images", s.images},
-          {"recall", recall},
-          {"recall_unoccluded", unoccluded},
-          {"false_positives", s.false_positives},
-          {"false_positives_per_image",
-           s.images > 0 ? json::Json(s.FalsePositivesPerImage()) : json::Json(nullptr)},
-          {"found_within_goals", s.within_goals},
-          {"found_within_goals_fraction",
-           found > 0 ? json::Json(double(s.within_goals) / found) : json::Json(nullptr)},
-          {"rotation_error_deg", StatsToJson(s.rotation_deg)},
-          {"position_error_across_mm", StatsToJson(s.across_mm)},
-          {"position_error_along_mm", StatsToJson(s.along_mm)},
-          {"reprojection_rms_px", StatsToJson(s.reprojection_rms_px)},
-          {"truth_projection_rms_px", StatsToJson(s.truth_projection_rms_px)},
-          {"time_per_image_ms", StatsToJson(s.time_ms)},
-          {"time_goal_ms", kTimeGoalMs},
-          {"images_over_time_goal", s.over_time_goal},
-          {"stage_time_ms", stages},
-          {"slowest_image", slowest}};
+  json::Json j = {{"images", s.images},
+                  {"recall", recall},
+                  {"recall_unoccluded", unoccluded},
+                  {"false_positives", s.false_positives},
+                  {"false_positives_per_image",
+                   s.images > 0 ? json::Json(s.FalsePositivesPerImage()) : json::Json(nullptr)},
+                  {"found_within_goals", s.within_goals},
+                  {"found_within_goals_fraction",
+                   found > 0 ? json::Json(double(s.within_goals) / found) : json::Json(nullptr)},
+                  {"time_per_image_ms", StatsToJson(s.time_ms)},
+                  {"time_goal_ms", kTimeGoalMs},
+                  {"images_over_time_goal", s.over_time_goal},
+                  {"stage_time_ms", stages},
+                  {"slowest_image", slowest}};
+  j.update(PoseFiguresToJson(s.poses));
+  return j;
 }
 
 Status PairedBuilder::Add(const ImageEvaluation& a, const ImageEvaluation& b) {
@@ -510,13 +521,8 @@ Status PairedBuilder::Add(const ImageEvaluation& a, const ImageEvaluation& b) {
     const ObjectOutcome &x = a.objects[i], &y = b.objects[i];
     if (x.detection < 0 || y.detection < 0) continue;
     ++counts_.objects;
-    for (auto [o, f] : {std::pair{&x, &a_}, std::pair{&y, &b_}}) {
-      f->rotation_deg.push_back(o->rotation_error_rad * kRadToDeg);
-      f->across_mm.push_back(o->position_error.across_m * 1e3);
-      f->along_mm.push_back(o->position_error.along_m * 1e3);
-      f->rms_px.push_back(o->reprojection_rms_px);
-      f->truth_projection_px.push_back(o->truth_projection_rms_px);
-    }
+    a_.Add(x);
+    b_.Add(y);
     // Which one is smaller; NaN compares false both ways and counts for neither.
     auto tally = [](double u, double v, int* u_smaller, int* v_smaller) {
       *u_smaller += u < v ? 1 : 0;
@@ -534,32 +540,20 @@ Status PairedBuilder::Add(const ImageEvaluation& a, const ImageEvaluation& b) {
 
 PairedSummary PairedBuilder::Build() const {
   PairedSummary s = counts_;
-  for (auto [f, out] : {std::pair{&a_, &s.a}, std::pair{&b_, &s.b}}) {
-    out->rotation_deg = Summarize(f->rotation_deg);
-    out->across_mm = Summarize(f->across_mm);
-    out->along_mm = Summarize(f->along_mm);
-    out->reprojection_rms_px = Summarize(f->rms_px);
-    out->truth_projection_rms_px = Summarize(f->truth_projection_px);
-  }
+  s.a = a_.Build();
+  s.b = b_.Build();
   return s;
 }
 
 json::Json PairedSummaryToJson(const PairedSummary& s, const std::string& first, const std::string& second) {
-  auto figures = [](const PairedFigures& f) {
-    return json::Json{{"rotation_error_deg", StatsToJson(f.rotation_deg)},
-                      {"position_error_across_mm", StatsToJson(f.across_mm)},
-                      {"position_error_along_mm", StatsToJson(f.along_mm)},
-                      {"reprojection_rms_px", StatsToJson(f.reprojection_rms_px)},
-                      {"truth_projection_rms_px", StatsToJson(f.truth_projection_rms_px)}};
-  };
   auto smaller = [](int rotation, int reprojection, int truth_projection) {
     return json::Json{{"rotation_error_deg", rotation},
                       {"reprojection_rms_px", reprojection},
                       {"truth_projection_rms_px", truth_projection}};
   };
   json::Json j = {{"objects", s.objects}};
-  j[first] = figures(s.a);
-  j[second] = figures(s.b);
+  j[first] = PoseFiguresToJson(s.a);
+  j[second] = PoseFiguresToJson(s.b);
   j[first + "_smaller"] =
       smaller(s.a_smaller_rotation, s.a_smaller_reprojection, s.a_smaller_truth_projection);
   j[second + "_smaller"] =

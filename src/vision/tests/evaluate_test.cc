@@ -143,8 +143,8 @@ TEST(EvaluateImageTest, MatchesByModelAndPoseAndCountsTheRestAsFalse) {
   EXPECT_DOUBLE_EQ(s.Recall(VisibilityBin::kLow), 0.5);
   EXPECT_DOUBLE_EQ(s.FalsePositivesPerImage(), 1.5);
   EXPECT_EQ(s.within_goals, 2);  // a: 0.4 deg, 0.5 mm across; c: exact
-  EXPECT_EQ(s.rotation_deg.count, 2);
-  EXPECT_NEAR(s.rotation_deg.max, 0.4, 1e-9);
+  EXPECT_EQ(s.poses.rotation_deg.count, 2);
+  EXPECT_NEAR(s.poses.rotation_deg.max, 0.4, 1e-9);
   EXPECT_DOUBLE_EQ(s.time_ms.median, 8.0);
   const json::Json j = SummaryToJson(s);
   EXPECT_EQ(j["recall"]["0.4-0.7"]["objects"], 2);
@@ -205,10 +205,10 @@ TEST(EvaluateImageTest, WithTheCameraEachMatchHasItsProjectionErrorAgainstTheTru
   SummaryBuilder builder;
   builder.Add(*with, 1.0);
   const Summary s = builder.Build();
-  EXPECT_EQ(s.truth_projection_rms_px.count, 2);
-  EXPECT_DOUBLE_EQ(s.truth_projection_rms_px.max, with->objects[2].truth_projection_rms_px);
+  EXPECT_EQ(s.poses.truth_projection_rms_px.count, 2);
+  EXPECT_DOUBLE_EQ(s.poses.truth_projection_rms_px.max, with->objects[2].truth_projection_rms_px);
   EXPECT_DOUBLE_EQ(SummaryToJson(s)["truth_projection_rms_px"]["max"].get<double>(),
-                   s.truth_projection_rms_px.max);
+                   s.poses.truth_projection_rms_px.max);
   // Without it, none.
   auto without = EvaluateImage(truth, detections, kSizes, eye, MatchOptions{});
   ASSERT_TRUE(without.ok());

@@ -199,6 +199,22 @@ struct ImageTime {
   std::map<std::string, int> counts;       // what it worked through (lines, corners, fitted hypotheses, ...)
 };
 
+// A set of found objects' pose figures.
+struct PoseFigures {
+  Stats rotation_deg, across_mm, along_mm, reprojection_rms_px, truth_projection_rms_px;
+};
+
+// Collects the pose figures of found objects, one sample of each figure per object; what both
+// builders below keep of a found object.
+class PoseSamples {
+ public:
+  void Add(const ObjectOutcome& found);
+  PoseFigures Build() const;
+
+ private:
+  std::vector<double> rotation_deg_, across_mm_, along_mm_, rms_px_, truth_projection_px_;
+};
+
 struct Summary {
   int images = 0;
   int objects[3] = {0, 0, 0};  // per VisibilityBin
@@ -206,8 +222,8 @@ struct Summary {
   int unoccluded_objects = 0, unoccluded_found = 0;  // visible fraction >= kUnoccludedFraction (in kHigh too)
   int false_positives = 0;
   int within_goals = 0;  // found objects whose pose meets every PoseGoals figure
-  Stats rotation_deg, across_mm, along_mm, reprojection_rms_px, time_ms;
-  Stats truth_projection_rms_px;               // of the found objects that have one (ObjectOutcome)
+  PoseFigures poses;     // of the found objects (truth_projection_rms_px: of those that have one)
+  Stats time_ms;
   int over_time_goal = 0;                      // images that took longer than kTimeGoalMs
   std::map<std::string, Stats> stage_time_ms;  // per stage, over the images that gave it
   std::optional<ImageTime> slowest;            // the image that took longest (none without images)
@@ -230,7 +246,8 @@ class SummaryBuilder {
  private:
   PoseGoals goals_;
   Summary counts_;
-  std::vector<double> rotation_deg_, across_mm_, along_mm_, rms_px_, truth_projection_px_, time_ms_;
+  PoseSamples poses_;
+  std::vector<double> time_ms_;
   std::map<std::string, std::vector<double>> stage_ms_;
 };
 
@@ -241,12 +258,9 @@ json::Json SummaryToJson(const Summary& summary);
 // Two methods' pose figures on the objects that both found. Each method's own medians are taken
 // over the objects it found, and a method that finds few objects, only the easy ones, can look
 // more precise than one that finds many; on the same objects the figures compare like with like.
-struct PairedFigures {
-  Stats rotation_deg, across_mm, along_mm, reprojection_rms_px, truth_projection_rms_px;
-};
 struct PairedSummary {
-  int objects = 0;     // found by both
-  PairedFigures a, b;  // the first method's figures on them, the second's
+  int objects = 0;   // found by both
+  PoseFigures a, b;  // the first method's figures on them, the second's
   // Objects on which the first method's figure is smaller than the second's, for the rotation
   // error, the reprojection RMS and the error against the truth's projection (ties and objects that
   // lack either figure count for neither).
@@ -263,11 +277,8 @@ class PairedBuilder {
   PairedSummary Build() const;
 
  private:
-  struct Figures {
-    std::vector<double> rotation_deg, across_mm, along_mm, rms_px, truth_projection_px;
-  };
   PairedSummary counts_;
-  Figures a_, b_;
+  PoseSamples a_, b_;
 };
 
 // {"objects", FIRST: figures, SECOND: figures, "FIRST_smaller": counts, "SECOND_smaller": counts},
