@@ -1,8 +1,8 @@
 // `teachsim bench recognize` from the command line: several render seeds pooled into one data set
 // (the figures are the sums of the seeds' own), teachsim alone without the peer, the peer compared
-// with teachsim on the blocks both found, and bad arguments answered with exit status 2 and a
-// message naming them. Skipped where the benchmarks are not built
-// (the sanitizer build) or the dev set is missing.
+// with teachsim on the blocks both found, each method's untimed warm-up, and bad arguments answered with exit
+// status 2 and a message naming them. Skipped where the benchmarks are not built (the sanitizer build) or the
+// dev set is missing.
 #include <gtest/gtest.h>
 #include <stdlib.h>
 
@@ -120,6 +120,14 @@ TEST_F(BenchRecognizeCliTest, SeveralRenderSeedsArePooledIntoOneDataSet) {
   // The dev set is measured once, whatever the seeds.
   EXPECT_EQ(pooled["data_sets"][0]["methods"]["teachsim"]["recall"],
             three["data_sets"][0]["methods"]["teachsim"]["recall"]);
+  // Before any image is timed, teachsim ran twice, untimed, on the dev set's first image; the peer,
+  // left out, did not.
+  const json::Json& warmup = pooled["setup"]["warmup"];
+  EXPECT_EQ(warmup["image"], "case_000.png") << warmup;
+  EXPECT_EQ(warmup["teachsim_ok"], true) << warmup;
+  ASSERT_EQ(warmup["teachsim_ms"].size(), 2u) << warmup;
+  for (const json::Json& ms : warmup["teachsim_ms"]) EXPECT_GT(ms.get<double>(), 0) << warmup;
+  EXPECT_FALSE(warmup.contains("linemod_ms")) << warmup;
 }
 
 // With the peer, each of its methods is compared with teachsim on the blocks both found (render seed 4
@@ -162,10 +170,17 @@ TEST_F(BenchRecognizeCliTest, EachPeerIsComparedWithTeachsimOnTheBlocksBothFound
     }
   }
   EXPECT_GT(pairs, 0);
-  // The table names the comparison.
+  // Both methods ran twice, untimed, before any image was timed.
+  const json::Json& warmup = (*document)["setup"]["warmup"];
+  EXPECT_EQ(warmup["teachsim_ms"].size(), 2u) << warmup;
+  ASSERT_EQ(warmup["linemod_ms"].size(), 2u) << warmup;
+  for (const json::Json& ms : warmup["linemod_ms"]) EXPECT_GT(ms.get<double>(), 0) << warmup;
+  // The table names the comparison and the warm-up.
   const CommandRun table = Teachsim("bench recognize --quick --render-seeds 4");
   ASSERT_EQ(table.status, 0) << table.err;
   EXPECT_NE(table.out.find("blocks teachsim and linemod_fit both found"), std::string::npos) << table.out;
+  EXPECT_NE(table.out.find("warm-up, untimed: each method twice on case_000.png first"), std::string::npos)
+      << table.out;
 }
 
 TEST_F(BenchRecognizeCliTest, BadArgumentsAreNamed) {
