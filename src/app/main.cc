@@ -30,7 +30,9 @@ int main(int argc, char** argv) {
   // to the system: a process whose first images are recognized before anything larger has been
   // freed page-faults every image's buffers anew (the dev set measured first in `bench recognize
   // --no-peer`: line detection 35 ms per image against 9 ms once warm; docs/benchmarks.md, session
-  // 37). Blocks below 32 MB come from the heap, which keeps up to 128 MB free.
+  // 37). Blocks below 32 MB come from the heap, which keeps up to 128 MB free. The first images
+  // still page-fault the heap as it grows: `bench recognize` runs each method twice, untimed,
+  // before it times any (session 49).
   mallopt(M_MMAP_THRESHOLD, 32 << 20);
   mallopt(M_TRIM_THRESHOLD, 128 << 20);
   CLI::App app{"teachsim " TEACHSIM_VERSION

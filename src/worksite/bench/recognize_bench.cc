@@ -1075,11 +1075,12 @@ int Run(const BenchArgs& args) {
     return 0;
   };
 
-  // Two untimed runs of each method on the dev set's first image before any image is timed. A
-  // process's first runs pay for fresh memory (first-touch page faults, while the allocator's mmap
-  // threshold grows and its heap with it): on our 2-core VM the line stage took 35-40 ms more on the
-  // first image and about 5 ms more on the second, whichever they were, and neither after one
-  // warm-up run on the first image. `teachsim up` pays this once.
+  // Untimed runs of teachsim and LINE-MOD on the dev set's first image before any image is timed
+  // (LINE-MOD + our fit reuses teachsim's line detector and fit, warmed with it). A process's first
+  // recognitions page-fault the memory its heap takes from the system (kept from then on: main.cc's
+  // mallopt): on our 2-core VM the line stage of the first image timed took 35-40 ms more, whichever
+  // image it was, and after one warm-up run still about 4 ms more (case_000: 9.4-9.6 ms against
+  // 5.0-5.6 after two). `teachsim up` pays this once.
   constexpr int kWarmupRuns = 2;
   json::Json warmup = json::Json::object();
   if (!dev->cases.empty()) {
@@ -1235,8 +1236,14 @@ int Run(const BenchArgs& args) {
       }
       return out + " ms";
     };
-    std::printf("warm-up, untimed: each method twice on %s first (teachsim %s",
-                warmup["image"].get<std::string>().c_str(), runs(warmup["teachsim_ms"]).c_str());
+    const int n = static_cast<int>(warmup["teachsim_ms"].size());
+    std::printf("warm-up, untimed: %s %s on %s first (teachsim %s%s",
+                warmup.contains("linemod_ms") ? "teachsim and LINE-MOD" : "teachsim",
+                n == 1   ? "once"
+                : n == 2 ? "twice"
+                         : (std::to_string(n) + " times").c_str(),
+                warmup["image"].get<std::string>().c_str(), runs(warmup["teachsim_ms"]).c_str(),
+                warmup["teachsim_ok"].get<bool>() ? "" : ", failed");
     if (warmup.contains("linemod_ms")) std::printf("; LINE-MOD %s", runs(warmup["linemod_ms"]).c_str());
     std::printf("): a process's first runs pay for fresh memory\n");
   }

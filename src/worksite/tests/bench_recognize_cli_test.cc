@@ -122,12 +122,18 @@ TEST_F(BenchRecognizeCliTest, SeveralRenderSeedsArePooledIntoOneDataSet) {
             three["data_sets"][0]["methods"]["teachsim"]["recall"]);
   // Before any image is timed, teachsim ran twice, untimed, on the dev set's first image; the peer,
   // left out, did not.
+  ASSERT_TRUE(pooled["setup"].contains("warmup")) << pooled["setup"];
   const json::Json& warmup = pooled["setup"]["warmup"];
+  ASSERT_TRUE(warmup.contains("image") && warmup.contains("teachsim_ms")) << warmup;
   EXPECT_EQ(warmup["image"], "case_000.png") << warmup;
   EXPECT_EQ(warmup["teachsim_ok"], true) << warmup;
   ASSERT_EQ(warmup["teachsim_ms"].size(), 2u) << warmup;
   for (const json::Json& ms : warmup["teachsim_ms"]) EXPECT_GT(ms.get<double>(), 0) << warmup;
   EXPECT_FALSE(warmup.contains("linemod_ms")) << warmup;
+  const CommandRun table = Teachsim("bench recognize --quick --no-peer --render-seeds 4");
+  ASSERT_EQ(table.status, 0) << table.err;
+  EXPECT_NE(table.out.find("warm-up, untimed: teachsim twice on case_000.png first"), std::string::npos)
+      << table.out;
 }
 
 // With the peer, each of its methods is compared with teachsim on the blocks both found (render seed 4
@@ -171,7 +177,9 @@ TEST_F(BenchRecognizeCliTest, EachPeerIsComparedWithTeachsimOnTheBlocksBothFound
   }
   EXPECT_GT(pairs, 0);
   // Both methods ran twice, untimed, before any image was timed.
+  ASSERT_TRUE((*document)["setup"].contains("warmup")) << (*document)["setup"];
   const json::Json& warmup = (*document)["setup"]["warmup"];
+  ASSERT_TRUE(warmup.contains("teachsim_ms") && warmup.contains("linemod_ms")) << warmup;
   EXPECT_EQ(warmup["teachsim_ms"].size(), 2u) << warmup;
   ASSERT_EQ(warmup["linemod_ms"].size(), 2u) << warmup;
   for (const json::Json& ms : warmup["linemod_ms"]) EXPECT_GT(ms.get<double>(), 0) << warmup;
@@ -179,7 +187,8 @@ TEST_F(BenchRecognizeCliTest, EachPeerIsComparedWithTeachsimOnTheBlocksBothFound
   const CommandRun table = Teachsim("bench recognize --quick --render-seeds 4");
   ASSERT_EQ(table.status, 0) << table.err;
   EXPECT_NE(table.out.find("blocks teachsim and linemod_fit both found"), std::string::npos) << table.out;
-  EXPECT_NE(table.out.find("warm-up, untimed: each method twice on case_000.png first"), std::string::npos)
+  EXPECT_NE(table.out.find("warm-up, untimed: teachsim and LINE-MOD twice on case_000.png first"),
+            std::string::npos)
       << table.out;
 }
 
