@@ -1082,6 +1082,7 @@ int Run(const BenchArgs& args) {
   // image it was, and after one warm-up run still about 4 ms more (case_000: 9.4-9.6 ms against
   // 5.0-5.6 after two). `teachsim up` pays this once.
   constexpr int kWarmupRuns = 2;
+  constexpr const char* kWarmupRunsInWords = "twice";  // for the table
   json::Json warmup = json::Json::object();
   if (!dev->cases.empty()) {
     const Case& first = dev->cases.front();
@@ -1236,12 +1237,8 @@ int Run(const BenchArgs& args) {
       }
       return out + " ms";
     };
-    const int n = static_cast<int>(warmup["teachsim_ms"].size());
     std::printf("warm-up, untimed: %s %s on %s first (teachsim %s%s",
-                warmup.contains("linemod_ms") ? "teachsim and LINE-MOD" : "teachsim",
-                n == 1   ? "once"
-                : n == 2 ? "twice"
-                         : (std::to_string(n) + " times").c_str(),
+                warmup.contains("linemod_ms") ? "teachsim and LINE-MOD" : "teachsim", kWarmupRunsInWords,
                 warmup["image"].get<std::string>().c_str(), runs(warmup["teachsim_ms"]).c_str(),
                 warmup["teachsim_ok"].get<bool>() ? "" : ", failed");
     if (warmup.contains("linemod_ms")) std::printf("; LINE-MOD %s", runs(warmup["linemod_ms"]).c_str());
