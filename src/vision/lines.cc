@@ -15,14 +15,19 @@ namespace teachsim::vision {
 
 namespace {
 
-// 8-connected chains of edge pixels; each pixel belongs to one chain.
-std::vector<std::vector<cv::Point>> TraceChains(const cv::Mat& edges) {
+// 8-connected chains of edge pixels; each pixel belongs to one chain. The chains kept (at least 5
+// pixels) are marked kEdgeOnChain in `edges`, the pixels of shorter ones kEdgeOffChain (no image of
+// its own for the pixels visited: one less fresh image for every recognition to fault in).
+std::vector<std::vector<cv::Point>> TraceChains(cv::Mat* edges_io) {
   static constexpr int kDx[8] = {1, 0, -1, 0, 1, -1, -1, 1};
   static constexpr int kDy[8] = {0, 1, 0, -1, 1, 1, -1, -1};
-  cv::Mat visited = cv::Mat::zeros(edges.size(), CV_8U);
+  // Canny's 255 until visited; kVisited on a chain being traced or kept.
+  constexpr uint8_t kUnvisited = 255, kVisited = 2;
+  static_assert(kEdgeOnChain == kUnvisited && kVisited != kEdgeOffChain && kVisited != 0);
+  cv::Mat& edges = *edges_io;
   const int w = edges.cols, h = edges.rows;
   auto is_edge = [&](int x, int y) {
-    return x >= 0 && y >= 0 && x < w && y < h && edges.at<uint8_t>(y, x) && !visited.at<uint8_t>(y, x);
+    return x >= 0 && y >= 0 && x < w && y < h && edges.at<uint8_t>(y, x) == kUnvisited;
   };
   auto neighbours = [&](int x, int y) {
     int n = 0;
@@ -32,7 +37,7 @@ std::vector<std::vector<cv::Point>> TraceChains(const cv::Mat& edges) {
   std::vector<std::vector<cv::Point>> chains;
   auto walk = [&](int x, int y) {
     std::vector<cv::Point> chain;
-    visited.at<uint8_t>(y, x) = 1;
+    edges.at<uint8_t>(y, x) = kVisited;
     chain.push_back({x, y});
     // Extend in both directions from the seed.
     for (int pass = 0; pass < 2; ++pass) {
@@ -48,24 +53,34 @@ std::vector<std::vector<cv::Point>> TraceChains(const cv::Mat& edges) {
         if (next < 0) break;
         cx += kDx[next];
         cy += kDy[next];
-        visited.at<uint8_t>(cy, cx) = 1;
+        edges.at<uint8_t>(cy, cx) = kVisited;
         chain.push_back({cx, cy});
       }
       if (pass == 0) std::reverse(chain.begin(), chain.end());
     }
-    if (chain.size() >= 5) chains.push_back(std::move(chain));
+    if (chain.size() >= 5) {
+      chains.push_back(std::move(chain));
+    } else {
+      for (const cv::Point& p : chain) edges.at<uint8_t>(p) = kEdgeOffChain;
+    }
   };
   // Chain ends first, so open chains are traced from one end; then what is left (closed loops).
   for (int y = 0; y < h; ++y) {
     const uint8_t* row = edges.ptr<uint8_t>(y);
     for (int x = 0; x < w; ++x) {
-      if (row[x] && !visited.at<uint8_t>(y, x) && neighbours(x, y) <= 1) walk(x, y);
+      if (row[x] == kUnvisited && neighbours(x, y) <= 1) walk(x, y);
     }
   }
   for (int y = 0; y < h; ++y) {
     const uint8_t* row = edges.ptr<uint8_t>(y);
     for (int x = 0; x < w; ++x) {
-      if (row[x] && !visited.at<uint8_t>(y, x)) walk(x, y);
+      if (row[x] == kUnvisited) walk(x, y);
+    }
+  }
+  for (int y = 0; y < h; ++y) {
+    uint8_t* row = edges.ptr<uint8_t>(y);
+    for (int x = 0; x < w; ++x) {
+      if (row[x] == kVisited) row[x] = kEdgeOnChain;
     }
   }
   return chains;
@@ -164,7 +179,7 @@ std::vector<ImageLine> MergeCollinear(std::vector<ImageLine> lines) {
 
 // The gradient magnitude of the image in linear light (internal::LinearLight), through the same
 // Gaussian and Sobel as the lines'.
-cv::Mat LinearMagnitude(const cv::Mat& image_gray8, double gamma) {
+cv::Mat LinearMagnitudeImage(const cv::Mat& image_gray8, double gamma) {
   const cv::Mat linear = internal::LinearLight(image_gray8, gamma);
   cv::Mat blurred, dx, dy, magnitude;
   cv::GaussianBlur(linear, blurred, cv::Size(5, 5), 1.0);
@@ -176,6 +191,66 @@ cv::Mat LinearMagnitude(const cv::Mat& image_gray8, double gamma) {
 
 }  // namespace
 
+cv::Mat NearEdgeBits(const cv::Mat& edges) {
+  TEACHSIM_CHECK(edges.type() == CV_8UC1);
+  static_assert(kEdgeNearPx == 2, "the shifts below dilate by 2 px");
+  const int cols = edges.cols, rows = edges.rows, bytes = (cols + 7) / 8, words = (cols + 63) / 64;
+  // Each row's pixels as bits in 64-bit words (bit j of word i is pixel 64 i + j), dilated along the
+  // row by shifts that carry across words; then each output row is the OR of the five rows around
+  // it. No dilated byte image (300 KB fresh per recognition at 640 x 480) in between.
+  std::vector<uint64_t> wide(static_cast<size_t>(rows) * words);
+  std::vector<uint64_t> packed(static_cast<size_t>(words));
+  const uint64_t last_mask = cols % 64 == 0 ? ~0ull : (1ull << (cols % 64)) - 1;
+  for (int y = 0; y < rows; ++y) {
+    const uint8_t* in = edges.ptr<uint8_t>(y);
+    std::fill(packed.begin(), packed.end(), 0);
+    int x = 0;
+    for (; x + 8 <= cols; x += 8) {
+      uint64_t eight;
+      std::memcpy(&eight, in + x, 8);
+      if (eight == 0) continue;
+      // Each byte's bits ORed into its lowest (masks keep the bytes apart), then the eight low bits
+      // gathered by one multiplication into the top byte: the byte at address x + i to bit i.
+      eight |= eight >> 4 & 0x0f0f0f0f0f0f0f0full;
+      eight |= eight >> 2 & 0x3333333333333333ull;
+      eight |= eight >> 1 & 0x5555555555555555ull;
+      uint64_t byte_bits = 0;
+      if constexpr (std::endian::native == std::endian::little) {
+        byte_bits = (eight & 0x0101010101010101ull) * 0x0102040810204080ull >> 56;
+      } else {
+        for (int i = 0; i < 8; ++i) byte_bits |= static_cast<uint64_t>(in[x + i] != 0) << i;
+      }
+      packed[static_cast<size_t>(x >> 6)] |= byte_bits << (x & 63);
+    }
+    for (; x < cols; ++x) {
+      if (in[x]) packed[static_cast<size_t>(x >> 6)] |= 1ull << (x & 63);
+    }
+    uint64_t* out = &wide[static_cast<size_t>(y) * words];
+    for (int i = 0; i < words; ++i) {
+      const uint64_t w = packed[static_cast<size_t>(i)];
+      const uint64_t before = i > 0 ? packed[static_cast<size_t>(i - 1)] : 0;
+      const uint64_t after = i + 1 < words ? packed[static_cast<size_t>(i + 1)] : 0;
+      // Pixel x is set where x - 2 .. x + 2 has an edge: shifted up (from lower x) and down.
+      uint64_t d = w | w << 1 | w << 2 | before >> 63 | before >> 62;
+      d |= w >> 1 | w >> 2 | after << 63 | after << 62;
+      out[i] = i + 1 == words ? d & last_mask : d;
+    }
+  }
+  cv::Mat near(rows, bytes, CV_8U);
+  std::vector<uint64_t> row(static_cast<size_t>(words));
+  for (int y = 0; y < rows; ++y) {
+    std::fill(row.begin(), row.end(), 0);
+    for (int v = std::max(0, y - kEdgeNearPx); v <= std::min(rows - 1, y + kEdgeNearPx); ++v) {
+      const uint64_t* src = &wide[static_cast<size_t>(v) * words];
+      for (int i = 0; i < words; ++i) row[static_cast<size_t>(i)] |= src[i];
+    }
+    uint8_t* bits = near.ptr<uint8_t>(y);
+    for (int b = 0; b < bytes; ++b)
+      bits[b] = static_cast<uint8_t>(row[static_cast<size_t>(b >> 3)] >> (8 * (b & 7)));
+  }
+  return near;
+}
+
 LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& camera,
                                   const RecognizerOptions& options) {
   TEACHSIM_CHECK(image_gray8.type() == CV_8UC1);
@@ -186,54 +261,30 @@ LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& came
   cv::Sobel(blurred, dy, CV_16S, 0, 1, 3);
   cv::Canny(dx, dy, out.edge_map.edges, options.canny_low, options.canny_high, true);
   out.edge_map.smoothed = blurred;
-  cv::Mat near;
-  cv::dilate(out.edge_map.edges, near,
-             cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kEdgeNearPx + 1, 2 * kEdgeNearPx + 1)));
-  // Packed 8 pixels to a byte (38 KB at 640 x 480, against 300 KB): most edge queries end at this
-  // one look-up, in scattered places, and the bytes missed the cache.
-  out.edge_map.near = cv::Mat::zeros(near.rows, (near.cols + 7) / 8, CV_8U);
-  for (int y = 0; y < near.rows; ++y) {
-    const uint8_t* in = near.ptr<uint8_t>(y);
-    uint8_t* bits = out.edge_map.near.ptr<uint8_t>(y);
-    int x = 0;
-    if constexpr (std::endian::native == std::endian::little) {
-      // Eight bytes (0 or 255) at once: their low bits, gathered by one multiplication into the top
-      // byte, byte i to bit i.
-      for (; x + 8 <= near.cols; x += 8) {
-        uint64_t eight;
-        std::memcpy(&eight, in + x, 8);
-        bits[x >> 3] = static_cast<uint8_t>(((eight & 0x0101010101010101ull) * 0x0102040810204080ull) >> 56);
-      }
-    }
-    for (; x < near.cols; ++x) {
-      if (in[x]) bits[x >> 3] = static_cast<uint8_t>(bits[x >> 3] | 1u << (x & 7));
-    }
-  }
+  out.edge_map.near = NearEdgeBits(out.edge_map.edges);
 
-  cv::Mat fdx, fdy, magnitude;
-  dx.convertTo(fdx, CV_32F);
-  dy.convertTo(fdy, CV_32F);
-  cv::magnitude(fdx, fdy, magnitude);
-  out.edge_map.magnitude = magnitude;
-  out.edge_map.linear_magnitude =
-      camera.gamma() == 1.0 ? magnitude : LinearMagnitude(image_gray8, camera.gamma());
-  out.edge_map.gradient = cv::Mat::zeros(image_gray8.size(), CV_32FC2);
+  // No float images of the gradient (EdgeMap::dx): where the magnitude is asked for, it is computed.
+  out.edge_map.dx = dx;
+  out.edge_map.dy = dy;
+  if (camera.gamma() != 1.0)
+    out.edge_map.linear_magnitude = LinearMagnitudeImage(image_gray8, camera.gamma());
+  const EdgeMap& edge_map = out.edge_map;
+  auto magnitude_at = [&edge_map](int x, int y) { return GradientMagnitude(edge_map, x, y); };
 
   const Intrinsics& k = camera.intrinsics();
-  const std::vector<std::vector<cv::Point>> chains = TraceChains(out.edge_map.edges);
+  const std::vector<std::vector<cv::Point>> chains = TraceChains(&out.edge_map.edges);
   std::vector<Eigen::Vector2d> points;
   for (const std::vector<cv::Point>& chain : chains) {
     points.clear();
     std::optional<Eigen::Vector2d> last;
     for (const cv::Point& p : chain) {
-      const float gx = fdx.at<float>(p), gy = fdy.at<float>(p);
-      const float m0 = magnitude.at<float>(p);
-      if (m0 > 0) out.edge_map.gradient.at<cv::Vec2f>(p) = cv::Vec2f(gx / m0, gy / m0);
+      const float gx = dx.at<int16_t>(p), gy = dy.at<int16_t>(p);
+      const float m0 = GradientMagnitude(edge_map, p.x, p.y);
       // Sub-pixel: the peak of a parabola through the gradient magnitude across the edge.
       Eigen::Vector2d pixel(p.x, p.y);
       if (m0 > 0) {
         const Eigen::Vector2d g(gx / m0, gy / m0);
-        pixel += g * internal::SubPixelEdgeOffset(magnitude, p.x, p.y, g.x(), g.y());
+        pixel += g * internal::SubPixelEdgeOffsetAt(magnitude_at, dx.cols, dx.rows, p.x, p.y, g.x(), g.y());
       }
       ++out.edge_points;
       // Undistort (Newton, warm-started from the previous point of the chain).
@@ -258,7 +309,7 @@ std::vector<ImageLine> DetectLines(const cv::Mat& image_gray8, const Camera& cam
 std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::Vector2d& pixel,
                                          const Eigen::Vector2d& normal, int max_offset_px) {
   // The hottest loop of the recognizer (every support hypothesis and verified pose samples it): the
-  // nearest pixel by floor(v + 0.5), and the unit gradient stored per edge pixel (no trigonometry).
+  // nearest pixel by floor(v + 0.5), and the unit gradient from the Sobel images (no trigonometry).
   static const float cos_tol = static_cast<float>(std::cos(25 * M_PI / 180));
   const int cols = edge_map.edges.cols, rows = edge_map.edges.rows;
   // The nearest pixel, floor(v + 0.5), where it lies in [0, size), else -1: for v + 0.5 >= 0
@@ -279,9 +330,11 @@ std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::V
     const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
     const int x = nearest(pixel.x() + offset * normal.x(), cols), y = nearest(pixel.y() + offset * normal.y(), rows);
     if (x < 0 || y < 0) continue;
-    if (!edge_map.edges.ptr<uint8_t>(y)[x]) continue;
-    const cv::Vec2f g = edge_map.gradient.ptr<cv::Vec2f>(y)[x];
-    if (std::abs(g[0] * nx + g[1] * ny) >= cos_tol) return EdgePixel{x, y, g[0], g[1]};
+    if (edge_map.edges.ptr<uint8_t>(y)[x] != kEdgeOnChain) continue;
+    const float m = GradientMagnitude(edge_map, x, y);
+    if (!(m > 0)) continue;
+    const float gx = edge_map.dx.ptr<int16_t>(y)[x] / m, gy = edge_map.dy.ptr<int16_t>(y)[x] / m;
+    if (std::abs(gx * nx + gy * ny) >= cos_tol) return EdgePixel{x, y, gx, gy};
   }
   return std::nullopt;
 }

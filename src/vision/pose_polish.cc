@@ -34,6 +34,7 @@ std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera,
   std::vector<LineMatch> out;
   *edges_with_points = 0;
   const int steps = static_cast<int>(std::ceil(search_px));
+  auto linear_magnitude_at = [&edge_map](int x, int y) { return LinearMagnitude(edge_map, x, y); };
   for (int e = 0; e < 12; ++e) {
     if (!(visible >> e & 1)) continue;
     const Eigen::Vector3d a = camera_T_object * BoxVertex(model.box_size_m, kBoxEdges[static_cast<size_t>(e)][0]);
@@ -60,14 +61,14 @@ std::vector<LineMatch> EdgePoints(const Model& model, const Camera& camera,
       const Eigen::Vector2d distorted =
           Eigen::Vector2d(edge->x, edge->y) +
           Eigen::Vector2d(edge->gx, edge->gy) *
-              internal::SubPixelEdgeOffset(edge_map.linear_magnitude, edge->x, edge->y, edge->gx, edge->gy);
+              internal::SubPixelEdgeOffsetAt(linear_magnitude_at, edge_map.dx.cols, edge_map.dx.rows, edge->x,
+                                             edge->y, edge->gx, edge->gy);
       // Undistorted, starting from the predicted point's ideal coordinates.
       const auto ideal = camera.Undistort(
           Eigen::Vector2d((distorted.x() - k.cx) / k.fx, (distorted.y() - k.cy) / k.fy), x.head<2>() / x.z());
       if (!ideal) continue;
       const Eigen::Vector2d p(k.fx * ideal->x() + k.cx, k.fy * ideal->y() + k.cy);
-      out.push_back(
-          {e, p, p, PolishPointWeight(edge_map.magnitude.at<float>(edge->y, edge->x), weigh_above)});
+      out.push_back({e, p, p, PolishPointWeight(GradientMagnitude(edge_map, edge->x, edge->y), weigh_above)});
       ++found;
     }
     if (found >= kMinPointsPerEdge) ++*edges_with_points;

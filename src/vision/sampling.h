@@ -10,18 +10,23 @@
 
 namespace teachsim::vision::internal {
 
+// Bilinear sample at (x, y) in pixels, clamped to a cols x rows image, of the values at(x, y)
+// returns at its pixels.
+template <typename At>
+inline float SampleBilinearAt(At at, int cols, int rows, double x, double y) {
+  x = std::clamp(x, 0.0, cols - 1.001);
+  y = std::clamp(y, 0.0, rows - 1.001);
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const double fx = x - x0, fy = y - y0;
+  return static_cast<float>((1 - fy) * ((1 - fx) * at(x0, y0) + fx * at(x0 + 1, y0)) +
+                            fy * ((1 - fx) * at(x0, y0 + 1) + fx * at(x0 + 1, y0 + 1)));
+}
+
 // Bilinear sample of a one-channel image of T (CV_32F: float; CV_8U: uint8_t) at (x, y) in pixels,
 // clamped to the image.
 template <typename T = float>
 inline float SampleBilinear(const cv::Mat& m, double x, double y) {
-  x = std::clamp(x, 0.0, m.cols - 1.001);
-  y = std::clamp(y, 0.0, m.rows - 1.001);
-  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  const double fx = x - x0, fy = y - y0;
-  const T* r0 = m.ptr<T>(y0);
-  const T* r1 = m.ptr<T>(y0 + 1);
-  return static_cast<float>((1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
-                            fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]));
+  return SampleBilinearAt([&m](int px, int py) { return m.ptr<T>(py)[px]; }, m.cols, m.rows, x, y);
 }
 
 // Bilinear sample of an 8-bit grey image at a pixel.
@@ -46,11 +51,13 @@ inline cv::Mat LinearLight(const cv::Mat& gray8, double gamma) {
 }
 
 // The sub-pixel offset of an edge pixel along its unit gradient (gx, gy): the peak of a parabola
-// through the gradient magnitude at -1, 0, +1 along it, within half a pixel (0 when not a peak).
-inline double SubPixelEdgeOffset(const cv::Mat& magnitude, int x, int y, double gx, double gy) {
-  const double m0 = magnitude.ptr<float>(y)[x];
-  const double mm = SampleBilinear(magnitude, x - gx, y - gy);
-  const double mp = SampleBilinear(magnitude, x + gx, y + gy);
+// through the gradient magnitude (at(x, y) at a pixel of a cols x rows image) at -1, 0, +1 along it,
+// within half a pixel (0 when not a peak).
+template <typename At>
+inline double SubPixelEdgeOffsetAt(At at, int cols, int rows, int x, int y, double gx, double gy) {
+  const double m0 = at(x, y);
+  const double mm = SampleBilinearAt(at, cols, rows, x - gx, y - gy);
+  const double mp = SampleBilinearAt(at, cols, rows, x + gx, y + gy);
   const double denom = mm - 2.0 * m0 + mp;
   return denom < 0 ? std::clamp(0.5 * (mm - mp) / denom, -0.5, 0.5) : 0.0;
 }

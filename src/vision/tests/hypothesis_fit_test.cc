@@ -500,6 +500,47 @@ TEST(HypothesisFitTest, TheMatchedShareCountsOnlyTheOutlineInsideTheImage) {
   EXPECT_EQ(far.matched_fraction, before.matched_fraction);
 }
 
+// NearEdgeBits is cv::dilate with a (2 kEdgeNearPx + 1) square, packed 8 pixels to a byte: on
+// random edge images of every width from 1 to 140 px (words of 64 bits, bytes, and what is left
+// over), sparse and dense, with edges on the borders.
+TEST(HypothesisFitTest, NearEdgeBitsAreTheDilatedEdgesPacked) {
+  std::mt19937 rng(5);
+  const cv::Mat square =
+      cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * kEdgeNearPx + 1, 2 * kEdgeNearPx + 1));
+  int set_bits = 0, clear_bits = 0;
+  for (int cols = 1; cols <= 140; ++cols) {
+    for (double density : {0.002, 0.03, 0.3}) {
+      const int rows = 1 + static_cast<int>(rng() % 12);
+      cv::Mat edges = cv::Mat::zeros(rows, cols, CV_8U);
+      std::bernoulli_distribution on(density);
+      for (int y = 0; y < rows; ++y) {
+        for (int x = 0; x < cols; ++x) {
+          if (on(rng)) edges.at<uint8_t>(y, x) = static_cast<uint8_t>(1 + rng() % 255);
+        }
+      }
+      if (cols % 7 == 0) edges.at<uint8_t>(rows - 1, cols - 1) = 255;  // the last byte's last bit
+      cv::Mat dilated;
+      cv::dilate(edges, dilated, square);
+      const cv::Mat near = NearEdgeBits(edges);
+      ASSERT_EQ(near.rows, rows);
+      ASSERT_EQ(near.cols, (cols + 7) / 8);
+      for (int y = 0; y < rows; ++y) {
+        for (int b = 0; b < near.cols; ++b) {
+          for (int bit = 0; bit < 8; ++bit) {
+            const int x = 8 * b + bit;
+            const bool got = (near.at<uint8_t>(y, b) >> bit & 1) != 0;
+            const bool want = x < cols && dilated.at<uint8_t>(y, x) != 0;
+            ASSERT_EQ(got, want) << cols << " x " << rows << " at (" << x << ", " << y << ")";
+            (got ? set_bits : clear_bits)++;
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(set_bits, 10000);
+  EXPECT_GT(clear_bits, 10000);
+}
+
 // EdgePixelAcross first looks at the dilated edges (EdgeMap::near, kEdgeNearPx in x and y) and
 // answers "none" where no edge pixel lies near: the same answer as looking along the normal pixel by
 // pixel, for points anywhere in the image (on edges, beside them, on blank table) and normals in

@@ -398,7 +398,7 @@ void DumpCase(const std::string& dir, const Case& c, const vision::Camera& camer
     return;
   }
   cv::imwrite(stem + ".png", out);
-  cv::imwrite(stem + ".edges.png", detection.edge_map.edges);
+  cv::imwrite(stem + ".edges.png", detection.edge_map.edges > 0);  // both kinds of edge pixel, 255
   // Each missed block close up (3x, nearest neighbour): the segments, the support-plane source's
   // corners with their arms (magenta) and the truth's visible edges, as DIR/NAME.MODEL.png.
   constexpr int kZoom = 3;
