@@ -644,8 +644,24 @@ bool ContinuesPastHiddenEnd(const Model& model, const Camera& camera, const geom
 
 FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& camera) {
   FixedEdgeMap out;
-  out.direction = cv::Mat(camera.height(), camera.width(), CV_32F, cv::Scalar(10.0));
   if (fixed_world == nullptr) return out;
+  out.piece = cv::Mat::zeros(camera.height(), camera.width(), CV_16U);
+  // Each piece's direction as the float a direction image would hold; past 65,535 pieces (no scene
+  // of ours comes near: the puzzle scene draws 720) a piece shares the entry of the
+  // drawn direction nearest its own.
+  std::vector<float> angles;
+  auto entry = [&](float angle) -> uint16_t {
+    if (angles.size() < std::numeric_limits<uint16_t>::max()) {
+      angles.push_back(angle);
+      out.direction.push_back({std::cos(angle), std::sin(angle)});
+      return static_cast<uint16_t>(angles.size());
+    }
+    size_t best = 0;
+    for (size_t i = 1; i < angles.size(); ++i) {
+      if (std::abs(angles[i] - angle) < std::abs(angles[best] - angle)) best = i;
+    }
+    return static_cast<uint16_t>(best + 1);
+  };
   const geometry::Pose3& world_T_camera = camera.world_T_camera();
   const geometry::Pose3 camera_T_world = world_T_camera.Inverse();
   constexpr double kStepPx = 6, kHalfWidthPx = 2, kMarginPx = 50;
@@ -700,8 +716,9 @@ FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& ca
             double angle = std::atan2((*q - *prev).y(), (*q - *prev).x());
             if (angle < 0) angle += M_PI;
             if (angle >= M_PI) angle -= M_PI;
-            cv::line(out.direction, cv::Point2d(prev->x(), prev->y()), cv::Point2d(q->x(), q->y()),
-                     cv::Scalar(angle), static_cast<int>(2 * kHalfWidthPx + 1), cv::LINE_8);
+            cv::line(out.piece, cv::Point2d(prev->x(), prev->y()), cv::Point2d(q->x(), q->y()),
+                     cv::Scalar(entry(static_cast<float>(angle))), static_cast<int>(2 * kHalfWidthPx + 1),
+                     cv::LINE_8);
           }
           prev = q;
         }
@@ -713,12 +730,12 @@ FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& ca
 
 bool OnFixedEdge(const FixedEdgeMap& fixed, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
   const int x = static_cast<int>(std::lround(pixel.x())), y = static_cast<int>(std::lround(pixel.y()));
-  if (fixed.direction.empty() || x < 0 || y < 0 || x >= fixed.direction.cols || y >= fixed.direction.rows)
-    return false;
-  const float a = fixed.direction.at<float>(y, x);
-  if (a > 4) return false;
+  if (fixed.piece.empty() || x < 0 || y < 0 || x >= fixed.piece.cols || y >= fixed.piece.rows) return false;
+  const uint16_t piece = fixed.piece.at<uint16_t>(y, x);
+  if (piece == 0) return false;
+  const auto [cos_a, sin_a] = fixed.direction[piece - 1u];
   // The fixed edge's direction against the predicted edge's (the normal turned by 90 deg).
-  return std::abs(std::cos(a) * normal.y() - std::sin(a) * normal.x()) >= std::cos(15 * M_PI / 180);
+  return std::abs(cos_a * normal.y() - sin_a * normal.x()) >= std::cos(15 * M_PI / 180);
 }
 
 int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object,

@@ -1409,7 +1409,10 @@ TEST(VerificationTest, FixedEdgesAreFoundAlongTheProjectedFrame) {
   auto camera = Camera::FromSpec(scene->cameras.at(0));
   ASSERT_TRUE(camera.ok());
   const FixedEdgeMap fixed = ProjectFixedEdges(&*scene, *camera);
-  ASSERT_EQ(fixed.direction.cols, camera->width());
+  ASSERT_EQ(fixed.piece.cols, camera->width());
+  // The frame and the table, drawn in pieces of about 6 px: hundreds of them, not tens of thousands.
+  EXPECT_GT(fixed.direction.size(), 50u);
+  EXPECT_LT(fixed.direction.size(), 10000u);
   // The frame's highest outer top edge along x: its middle, seen from the scene's camera.
   const scene::SceneObject& frame = scene->objects.at(static_cast<std::size_t>(scene->FindObject("frame")));
   geometry::Aabb walls;
@@ -1425,9 +1428,9 @@ TEST(VerificationTest, FixedEdgesAreFoundAlongTheProjectedFrame) {
     const Eigen::Vector2d mid = 0.5 * (*pa + *pb), along = (*pb - *pa).normalized();
     const Eigen::Vector2d normal(-along.y(), along.x());
     EXPECT_TRUE(OnFixedEdge(fixed, mid, normal))
-        << mid.transpose() << ": "
-        << fixed.direction.at<float>(static_cast<int>(std::lround(mid.y())),
-                                     static_cast<int>(std::lround(mid.x())));
+        << mid.transpose() << ": piece "
+        << fixed.piece.at<uint16_t>(static_cast<int>(std::lround(mid.y())),
+                                    static_cast<int>(std::lround(mid.x())));
     EXPECT_FALSE(OnFixedEdge(fixed, mid, along));  // a predicted edge across the fixed one
     EXPECT_FALSE(OnFixedEdge(fixed, mid + 12 * normal, normal));
     ++checked;

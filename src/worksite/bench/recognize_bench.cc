@@ -119,6 +119,13 @@ struct DataSet {
   std::vector<Case> cases;
 };
 
+// A case that cannot be measured (its camera, which the loaders check, should not fail here): named
+// on stderr, exit status 2.
+int ReportCaseError(const Case& c, const Status& status) {
+  std::fprintf(stderr, "teachsim: error: %s: %s\n", c.name.c_str(), status.message().c_str());
+  return 2;
+}
+
 Result<DataSet> LoadDevSet(const vision::TruthSet& truth, std::size_t max_cases) {
   DataSet set{"dev", "../shared/data/vision-dev: POV-Ray, 640x480, distortion, soft shadows, wood, noise", {}};
   for (const vision::TruthCase& c : truth.cases) {
@@ -782,7 +789,7 @@ int Run(const BenchArgs& args) {
         }
       }
       auto camera = vision::Camera::FromSpec(c.camera);
-      if (!camera.ok()) return 2;
+      if (!camera.ok()) return ReportCaseError(c, camera.status());
       const scene::Scene fixed_world = vision::FixedWorldScene(c.frame);
       const Eigen::Vector3d eye = c.camera.world_T_camera.translation;
       std::vector<vision::Detection> found[kMethodCount];
@@ -1087,11 +1094,7 @@ int Run(const BenchArgs& args) {
   if (!dev->cases.empty()) {
     const Case& first = dev->cases.front();
     auto camera = vision::Camera::FromSpec(first.camera);
-    if (!camera.ok()) {
-      std::fprintf(stderr, "teachsim: error: %s: %s\n", first.name.c_str(),
-                   camera.status().message().c_str());
-      return 2;
-    }
+    if (!camera.ok()) return ReportCaseError(first, camera.status());
     const scene::Scene fixed_world = vision::FixedWorldScene(first.frame);
     json::Json teachsim_ms = json::Json::array(), linemod_ms = json::Json::array();
     bool recognized = true;

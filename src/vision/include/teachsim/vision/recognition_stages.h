@@ -509,7 +509,13 @@ std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models,
 // The known fixed world's visible edges in the (distorted) image: a block's predicted edge lying
 // along one of them is explained by the fixed world already and is no evidence for the block.
 struct FixedEdgeMap {
-  cv::Mat direction;  // CV_32F: image direction of the fixed edge within 2 px, rad in [0, pi); > 4 where none
+  // CV_16U: 1 + the index in `across` of the fixed edge's piece drawn within 2 px, 0 where none;
+  // empty without a fixed world. Half the pages of a float image of directions, none filled when
+  // there is nothing to draw.
+  cv::Mat piece;
+  // Per piece, the cosine and sine of its image direction (rad in [0, pi), as float): no
+  // trigonometry per query.
+  std::vector<std::array<float, 2>> direction;
 };
 FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& camera);
 // Whether a predicted edge through `pixel` with unit `normal` runs along a fixed edge (within 15 deg).
