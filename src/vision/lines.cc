@@ -278,12 +278,10 @@ LineDetection DetectLinesAndEdges(const cv::Mat& image_gray8, const Camera& came
     points.clear();
     std::optional<Eigen::Vector2d> last;
     for (const cv::Point& p : chain) {
-      const float gx = dx.at<int16_t>(p), gy = dy.at<int16_t>(p);
-      const float m0 = GradientMagnitude(edge_map, p.x, p.y);
       // Sub-pixel: the peak of a parabola through the gradient magnitude across the edge.
       Eigen::Vector2d pixel(p.x, p.y);
-      if (m0 > 0) {
-        const Eigen::Vector2d g(gx / m0, gy / m0);
+      if (const auto unit = UnitGradient(edge_map, p.x, p.y)) {
+        const Eigen::Vector2d g((*unit)[0], (*unit)[1]);
         pixel += g * internal::SubPixelEdgeOffsetAt(magnitude_at, dx.cols, dx.rows, p.x, p.y, g.x(), g.y());
       }
       ++out.edge_points;
@@ -331,9 +329,9 @@ std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::V
     const int x = nearest(pixel.x() + offset * normal.x(), cols), y = nearest(pixel.y() + offset * normal.y(), rows);
     if (x < 0 || y < 0) continue;
     if (edge_map.edges.ptr<uint8_t>(y)[x] != kEdgeOnChain) continue;
-    const float m = GradientMagnitude(edge_map, x, y);
-    if (!(m > 0)) continue;
-    const float gx = edge_map.dx.ptr<int16_t>(y)[x] / m, gy = edge_map.dy.ptr<int16_t>(y)[x] / m;
+    const auto unit = UnitGradient(edge_map, x, y);
+    if (!unit) continue;
+    const auto [gx, gy] = *unit;
     if (std::abs(gx * nx + gy * ny) >= cos_tol) return EdgePixel{x, y, gx, gy};
   }
   return std::nullopt;

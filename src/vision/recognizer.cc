@@ -13,6 +13,7 @@
 #include <opencv2/imgproc.hpp>
 #include <optional>
 #include <set>
+#include <unordered_map>
 
 #include "model_editor.h"
 #include "model_index.h"
@@ -642,25 +643,24 @@ bool ContinuesPastHiddenEnd(const Model& model, const Camera& camera, const geom
   return false;
 }
 
-FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& camera) {
+FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& camera, int max_16bit_pieces) {
   FixedEdgeMap out;
   if (fixed_world == nullptr) return out;
-  out.piece = cv::Mat::zeros(camera.height(), camera.width(), CV_16U);
-  // Each piece's direction as the float a direction image would hold; past 65,535 pieces (no scene
-  // of ours comes near: the puzzle scene draws 720) a piece shares the entry of the
-  // drawn direction nearest its own.
-  std::vector<float> angles;
-  auto entry = [&](float angle) -> uint16_t {
-    if (angles.size() < std::numeric_limits<uint16_t>::max()) {
-      angles.push_back(angle);
+  // Each piece's direction as the float a direction image would hold, one entry per distinct
+  // direction. The image of entries is made at the first piece drawn, 16-bit; should there be more
+  // than max_16bit_pieces entries (no scene of ours comes near: the puzzle scene draws 720 pieces),
+  // it becomes 32-bit, with the same entries.
+  std::unordered_map<float, int> entry_of;
+  auto entry = [&](float angle) -> int {
+    const auto [it, added] = entry_of.emplace(angle, static_cast<int>(out.direction.size()) + 1);
+    if (added) {
       out.direction.push_back({std::cos(angle), std::sin(angle)});
-      return static_cast<uint16_t>(angles.size());
+      if (out.piece.empty()) out.piece = cv::Mat::zeros(camera.height(), camera.width(), CV_16U);
+      if (out.piece.depth() == CV_16U && it->second > std::min(max_16bit_pieces, 65535)) {
+        out.piece.convertTo(out.piece, CV_32S);
+      }
     }
-    size_t best = 0;
-    for (size_t i = 1; i < angles.size(); ++i) {
-      if (std::abs(angles[i] - angle) < std::abs(angles[best] - angle)) best = i;
-    }
-    return static_cast<uint16_t>(best + 1);
+    return it->second;
   };
   const geometry::Pose3& world_T_camera = camera.world_T_camera();
   const geometry::Pose3 camera_T_world = world_T_camera.Inverse();
@@ -716,9 +716,9 @@ FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& ca
             double angle = std::atan2((*q - *prev).y(), (*q - *prev).x());
             if (angle < 0) angle += M_PI;
             if (angle >= M_PI) angle -= M_PI;
+            const int piece = entry(static_cast<float>(angle));  // makes or widens out.piece first
             cv::line(out.piece, cv::Point2d(prev->x(), prev->y()), cv::Point2d(q->x(), q->y()),
-                     cv::Scalar(entry(static_cast<float>(angle))), static_cast<int>(2 * kHalfWidthPx + 1),
-                     cv::LINE_8);
+                     cv::Scalar(piece), static_cast<int>(2 * kHalfWidthPx + 1), cv::LINE_8);
           }
           prev = q;
         }
@@ -731,9 +731,10 @@ FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& ca
 bool OnFixedEdge(const FixedEdgeMap& fixed, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal) {
   const int x = static_cast<int>(std::lround(pixel.x())), y = static_cast<int>(std::lround(pixel.y()));
   if (fixed.piece.empty() || x < 0 || y < 0 || x >= fixed.piece.cols || y >= fixed.piece.rows) return false;
-  const uint16_t piece = fixed.piece.at<uint16_t>(y, x);
+  const int piece =
+      fixed.piece.depth() == CV_16U ? fixed.piece.at<uint16_t>(y, x) : fixed.piece.at<int32_t>(y, x);
   if (piece == 0) return false;
-  const auto [cos_a, sin_a] = fixed.direction[piece - 1u];
+  const auto [cos_a, sin_a] = fixed.direction[static_cast<size_t>(piece - 1)];
   // The fixed edge's direction against the predicted edge's (the normal turned by 90 deg).
   return std::abs(cos_a * normal.y() - sin_a * normal.x()) >= std::cos(15 * M_PI / 180);
 }

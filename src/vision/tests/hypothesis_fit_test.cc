@@ -500,6 +500,74 @@ TEST(HypothesisFitTest, TheMatchedShareCountsOnlyTheOutlineInsideTheImage) {
   EXPECT_EQ(far.matched_fraction, before.matched_fraction);
 }
 
+// The edge map keeps the 16-bit Sobel images only: the magnitude computed where asked is, at every
+// pixel, the float cv::magnitude gives on float copies of them, and the unit gradient is the
+// Sobel vector divided by it.
+TEST(HypothesisFitTest, TheGradientIsComputedWhereAskedAsOpenCvComputesIt) {
+  const Camera camera = SyntheticCamera();
+  const Model bar = Bar();
+  const cv::Mat image = RenderBox(camera, bar.box_size_m, OnTable(bar.box_size_m, 0.01, -0.02, 0.7));
+  const LineDetection detection = DetectLinesAndEdges(image, camera, RecognizerOptions());
+  const EdgeMap& edge_map = detection.edge_map;
+  ASSERT_EQ(edge_map.dx.type(), CV_16S);
+  cv::Mat fdx, fdy, magnitude;
+  edge_map.dx.convertTo(fdx, CV_32F);
+  edge_map.dy.convertTo(fdy, CV_32F);
+  cv::magnitude(fdx, fdy, magnitude);
+  int positive = 0;
+  for (int y = 0; y < magnitude.rows; ++y) {
+    for (int x = 0; x < magnitude.cols; ++x) {
+      const float m = magnitude.at<float>(y, x);
+      ASSERT_EQ(GradientMagnitude(edge_map, x, y), m) << x << ", " << y;
+      const auto unit = UnitGradient(edge_map, x, y);
+      ASSERT_EQ(unit.has_value(), m > 0) << x << ", " << y;
+      if (!unit) continue;
+      ++positive;
+      EXPECT_EQ((*unit)[0], fdx.at<float>(y, x) / m);
+      EXPECT_EQ((*unit)[1], fdy.at<float>(y, x) / m);
+    }
+  }
+  EXPECT_GT(positive, 10000);
+}
+
+// The edge image holds 255 on chains long enough for a line and 1 on shorter ones, and an edge
+// query passes over the shorter ones.
+TEST(HypothesisFitTest, EdgeQueriesPassOverChainsTooShortForALine) {
+  const Camera camera = SyntheticCamera();
+  const Model bar = Bar();
+  cv::Mat image = RenderBox(camera, bar.box_size_m, OnTable(bar.box_size_m, 0.01, -0.02, 0.7));
+  // A few specks on the table: short closed Canny chains.
+  for (int i = 0; i < 6; ++i) cv::circle(image, cv::Point(40 + 25 * i, 40), 1, cv::Scalar(0), cv::FILLED);
+  const LineDetection detection = DetectLinesAndEdges(image, camera, RecognizerOptions());
+  int on_chain = 0, off_chain = 0;
+  for (int y = 0; y < image.rows; ++y) {
+    for (int x = 0; x < image.cols; ++x) {
+      const uint8_t v = detection.edge_map.edges.at<uint8_t>(y, x);
+      ASSERT_TRUE(v == 0 || v == kEdgeOnChain || v == kEdgeOffChain) << int{v} << " at " << x << ", " << y;
+      on_chain += v == kEdgeOnChain;
+      off_chain += v == kEdgeOffChain;
+    }
+  }
+  EXPECT_GT(on_chain, 500);
+  // By hand: one edge pixel with its gradient along +x, found across a vertical edge through it as
+  // a chain pixel and not as a pixel of a short chain.
+  EdgeMap map;
+  map.edges = cv::Mat::zeros(20, 20, CV_8U);
+  map.dx = cv::Mat::zeros(20, 20, CV_16S);
+  map.dy = cv::Mat::zeros(20, 20, CV_16S);
+  map.dx.at<int16_t>(10, 10) = 400;
+  const Eigen::Vector2d at(9.2, 10), across(1, 0);
+  map.edges.at<uint8_t>(10, 10) = kEdgeOffChain;
+  EXPECT_FALSE(EdgePixelAcross(map, at, across, 2));
+  map.edges.at<uint8_t>(10, 10) = kEdgeOnChain;
+  const std::optional<EdgePixel> found = EdgePixelAcross(map, at, across, 2);
+  ASSERT_TRUE(found);
+  EXPECT_EQ(found->x, 10);
+  EXPECT_EQ(found->gx, 1.0f);
+  EXPECT_EQ(found->gy, 0.0f);
+  EXPECT_GT(off_chain, 0);  // the specks
+}
+
 // NearEdgeBits is cv::dilate with a (2 kEdgeNearPx + 1) square, packed 8 pixels to a byte: on
 // random edge images of every width from 1 to 140 px (words of 64 bits, bytes, and what is left
 // over), sparse and dense, with edges on the borders.

@@ -1437,6 +1437,25 @@ TEST(VerificationTest, FixedEdgesAreFoundAlongTheProjectedFrame) {
   }
   EXPECT_GE(checked, 1);
   // No fixed world: nothing is explained.
+  // With at most 100 entries in 16 bits, the image of pieces becomes 32-bit and answers the same at
+  // every pixel of the image, along and across.
+  ASSERT_GT(fixed.direction.size(), 100u);
+  const FixedEdgeMap wide = ProjectFixedEdges(&*scene, *camera, 100);
+  ASSERT_EQ(fixed.piece.depth(), CV_16U);
+  ASSERT_EQ(wide.piece.depth(), CV_32S);
+  EXPECT_EQ(wide.direction, fixed.direction);
+  int on = 0;
+  for (int y = 0; y < camera->height(); y += 2) {
+    for (int x = 0; x < camera->width(); x += 2) {
+      for (const Eigen::Vector2d& n :
+           {Eigen::Vector2d(1, 0), Eigen::Vector2d(0, 1), Eigen::Vector2d(0.6, 0.8)}) {
+        const bool answer = OnFixedEdge(fixed, Eigen::Vector2d(x, y), n);
+        ASSERT_EQ(OnFixedEdge(wide, Eigen::Vector2d(x, y), n), answer) << x << ", " << y;
+        on += answer;
+      }
+    }
+  }
+  EXPECT_GT(on, 1000);
   const FixedEdgeMap none = ProjectFixedEdges(nullptr, *camera);
   EXPECT_FALSE(OnFixedEdge(none, Eigen::Vector2d(320, 240), Eigen::Vector2d(1, 0)));
 }

@@ -119,8 +119,8 @@ struct DataSet {
   std::vector<Case> cases;
 };
 
-// A case that cannot be measured (its camera, which the loaders check, should not fail here): named
-// on stderr, exit status 2.
+// A case whose camera Camera::FromSpec refuses (the loaders check the same fields; this names the
+// case should they ever part): named on stderr, exit status 2.
 int ReportCaseError(const Case& c, const Status& status) {
   std::fprintf(stderr, "teachsim: error: %s: %s\n", c.name.c_str(), status.message().c_str());
   return 2;

@@ -37,8 +37,8 @@ uint16_t OutlineBoxEdges(const Eigen::Vector3d& size_m, const Eigen::Vector3d& c
 
 // ---- item 1: the image's edges (kept for verification) and lines.
 struct EdgeMap {
-  // CV_8U, the Canny edge pixels (distorted image): kEdgeOnChain on the chains the lines were
-  // fitted to, kEdgeOffChain on chains too short for a line (which EdgePixelAcross passes over).
+  // CV_8U, the Canny edge pixels (distorted image): kEdgeOnChain on chains long enough for a line
+  // (5 px or more), kEdgeOffChain on shorter ones (which EdgePixelAcross passes over).
   cv::Mat edges;
   // CV_16S, the Sobel derivatives of `smoothed`: the gradient, its unit vector at an edge pixel and
   // its magnitude (GradientMagnitude), computed where asked rather than kept as float images
@@ -63,6 +63,12 @@ inline constexpr uint8_t kEdgeOnChain = 255, kEdgeOffChain = 1;
 inline float GradientMagnitude(const EdgeMap& edge_map, int x, int y) {
   const float gx = edge_map.dx.ptr<int16_t>(y)[x], gy = edge_map.dy.ptr<int16_t>(y)[x];
   return std::sqrt(gx * gx + gy * gy);
+}
+// The unit gradient at pixel (x, y), inside the image, where its magnitude is above 0.
+inline std::optional<std::array<float, 2>> UnitGradient(const EdgeMap& edge_map, int x, int y) {
+  const float m = GradientMagnitude(edge_map, x, y);
+  if (!(m > 0)) return std::nullopt;
+  return std::array<float, 2>{edge_map.dx.ptr<int16_t>(y)[x] / m, edge_map.dy.ptr<int16_t>(y)[x] / m};
 }
 // EdgeMap::linear_magnitude at pixel (x, y), inside the image; GradientMagnitude for a linear camera.
 inline float LinearMagnitude(const EdgeMap& edge_map, int x, int y) {
@@ -509,15 +515,18 @@ std::vector<SupportHypothesis> AlternativeHypotheses(const ModelLibrary& models,
 // The known fixed world's visible edges in the (distorted) image: a block's predicted edge lying
 // along one of them is explained by the fixed world already and is no evidence for the block.
 struct FixedEdgeMap {
-  // CV_16U: 1 + the index in `across` of the fixed edge's piece drawn within 2 px, 0 where none;
-  // empty without a fixed world. Half the pages of a float image of directions, none filled when
-  // there is nothing to draw.
+  // CV_16U (CV_32S past max_16bit_pieces entries): 1 + the index in `direction` of the fixed edge
+  // piece drawn within 2 px, 0 where none; empty when no fixed edge is drawn. Half the pages of a
+  // float image of directions.
   cv::Mat piece;
-  // Per piece, the cosine and sine of its image direction (rad in [0, pi), as float): no
+  // Per distinct direction, its cosine and sine (the direction rad in [0, pi), as float): no
   // trigonometry per query.
   std::vector<std::array<float, 2>> direction;
 };
-FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& camera);
+// The visible edges of the fixed world's parts, drawn 5 px wide in pieces of about 6 px. Tests
+// lower max_16bit_pieces to reach the 32-bit image.
+FixedEdgeMap ProjectFixedEdges(const scene::Scene* fixed_world, const Camera& camera,
+                               int max_16bit_pieces = 65535);
 // Whether a predicted edge through `pixel` with unit `normal` runs along a fixed edge (within 15 deg).
 bool OnFixedEdge(const FixedEdgeMap& fixed, const Eigen::Vector2d& pixel, const Eigen::Vector2d& normal);
 
