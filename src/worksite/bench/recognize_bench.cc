@@ -119,11 +119,12 @@ struct DataSet {
   std::vector<Case> cases;
 };
 
-// A case whose camera Camera::FromSpec refuses (the loaders check the same fields; this names the
-// case should they ever part): named on stderr, exit status 2.
-int ReportCaseError(const Case& c, const Status& status) {
+// An error on one case, named on stderr; returns exit_status: 2 for a camera Camera::FromSpec
+// refuses (the loaders check the same fields; this names the case should they ever part), 1 where
+// the evaluation of what was found fails.
+int ReportCaseError(const Case& c, const Status& status, int exit_status) {
   std::fprintf(stderr, "teachsim: error: %s: %s\n", c.name.c_str(), status.message().c_str());
-  return 2;
+  return exit_status;
 }
 
 Result<DataSet> LoadDevSet(const vision::TruthSet& truth, std::size_t max_cases) {
@@ -789,7 +790,7 @@ int Run(const BenchArgs& args) {
         }
       }
       auto camera = vision::Camera::FromSpec(c.camera);
-      if (!camera.ok()) return ReportCaseError(c, camera.status());
+      if (!camera.ok()) return ReportCaseError(c, camera.status(), 2);
       const scene::Scene fixed_world = vision::FixedWorldScene(c.frame);
       const Eigen::Vector3d eye = c.camera.world_T_camera.translation;
       std::vector<vision::Detection> found[kMethodCount];
@@ -975,11 +976,7 @@ int Run(const BenchArgs& args) {
         }
         if (evaluation.ok()) {
           auto hosts = vision::FalsePositiveHosts(c.truth, found[0], truth->model_sizes_m, *evaluation);
-          if (!hosts.ok()) {
-            std::fprintf(stderr, "teachsim: error: %s: %s\n", c.name.c_str(),
-                         hosts.status().message().c_str());
-            return 1;
-          }
+          if (!hosts.ok()) return ReportCaseError(c, hosts.status(), 1);
           for (std::size_t d = 0; d < hosts->size(); ++d) {
             if (evaluation->detection_truth[d] != -1) continue;
             const int host = (*hosts)[d];
@@ -1063,10 +1060,7 @@ int Run(const BenchArgs& args) {
         }
         auto evaluation =
             vision::EvaluateImage(c.truth, found[m], truth->model_sizes_m, eye, match, &*camera);
-        if (!evaluation.ok()) {
-          std::fprintf(stderr, "teachsim: error: %s: %s\n", c.name.c_str(), evaluation.status().message().c_str());
-          return 1;
-        }
+        if (!evaluation.ok()) return ReportCaseError(c, evaluation.status(), 1);
         result.builders[m].Add(*evaluation,
                                m <= 1 ? recognized_time : vision::ImageTime{time_ms[m], c.name, {}, {}});
         evaluations[m] = std::move(*evaluation);
@@ -1094,7 +1088,7 @@ int Run(const BenchArgs& args) {
   if (!dev->cases.empty()) {
     const Case& first = dev->cases.front();
     auto camera = vision::Camera::FromSpec(first.camera);
-    if (!camera.ok()) return ReportCaseError(first, camera.status());
+    if (!camera.ok()) return ReportCaseError(first, camera.status(), 2);
     const scene::Scene fixed_world = vision::FixedWorldScene(first.frame);
     json::Json teachsim_ms = json::Json::array(), linemod_ms = json::Json::array();
     bool recognized = true;
