@@ -204,15 +204,42 @@ JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines) {
     return i;
   };
   const double cos_tol = std::cos(kCollinearDeg * M_PI / 180);
+  // Only lines within kCollinearDeg of each other's direction join: the lines go into buckets of
+  // their direction (mod 180 deg) wider than that, and each is tested against those of its own
+  // bucket and the two beside it, not against every other line (the pairs tried are those of a loop
+  // over all pairs that can pass, in the same order). Lines without a direction (shorter than 1e-9
+  // px, or not finite) join none.
+  constexpr int kBuckets = 45;  // 4 deg each
+  static_assert(180.0 / kBuckets > kCollinearDeg);
+  std::vector<int> bucket(static_cast<size_t>(n), -1);
+  std::vector<std::vector<int>> in_bucket(kBuckets);
   for (int i = 0; i < n; ++i) {
+    const ImageLine& l = lines[static_cast<size_t>(i)];
+    if (!(l.Length() >= 1e-9) || !l.a.allFinite() || !l.b.allFinite()) continue;
+    double angle = std::atan2(l.b.y() - l.a.y(), l.b.x() - l.a.x());  // (-pi, pi]
+    if (angle < 0) angle += M_PI;
+    const int b = std::min(kBuckets - 1, static_cast<int>(angle / M_PI * kBuckets));
+    bucket[static_cast<size_t>(i)] = b;
+    in_bucket[static_cast<size_t>(b)].push_back(i);
+  }
+  std::vector<int> candidates;
+  for (int i = 0; i < n; ++i) {
+    if (bucket[static_cast<size_t>(i)] < 0) continue;
     const ImageLine& li = lines[static_cast<size_t>(i)];
     const double length_i = li.Length();
-    if (length_i < 1e-9) continue;
     const Eigen::Vector2d di = (li.b - li.a) / length_i;
-    for (int j = i + 1; j < n; ++j) {
+    candidates.clear();
+    for (int step = -1; step <= 1; ++step) {
+      for (const int j :
+           in_bucket[static_cast<size_t>((bucket[static_cast<size_t>(i)] + step + kBuckets) % kBuckets)]) {
+        if (j > i) candidates.push_back(j);
+      }
+    }
+    std::sort(candidates.begin(), candidates.end());
+    for (const int j : candidates) {
       const ImageLine& lj = lines[static_cast<size_t>(j)];
       const double length_j = lj.Length();
-      if (length_j < 1e-9 || std::abs(di.dot((lj.b - lj.a) / length_j)) < cos_tol) continue;
+      if (std::abs(di.dot((lj.b - lj.a) / length_j)) < cos_tol) continue;
       // Each on the other's line (the longer one's line is the better reference).
       const ImageLine& longer = length_i >= length_j ? li : lj;
       const ImageLine& shorter = length_i >= length_j ? lj : li;
@@ -253,36 +280,17 @@ JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines) {
 
 std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& input_lines, const RecognizerOptions& options) {
   const JoinedLines joined = JoinCollinearLines(input_lines);
-  const std::vector<ImageLine>& lines = joined.extent;
+  std::vector<char> representative(input_lines.size());
+  for (size_t i = 0; i < input_lines.size(); ++i)
+    representative[i] = joined.representative[i] == static_cast<int>(i);
   std::vector<ImageCorner> corners;
-  const int n = static_cast<int>(lines.size());
-  const double min_sin = std::sin(15.0 * M_PI / 180);
-  for (int i = 0; i < n; ++i) {
-    if (joined.representative[static_cast<size_t>(i)] != i) continue;
-    const Eigen::Vector2d di = (lines[static_cast<size_t>(i)].b - lines[static_cast<size_t>(i)].a).normalized();
-    for (int j = i + 1; j < n; ++j) {
-      if (joined.representative[static_cast<size_t>(j)] != j) continue;
-      const Eigen::Vector2d dj = (lines[static_cast<size_t>(j)].b - lines[static_cast<size_t>(j)].a).normalized();
-      const double s = Cross2(di, dj);
-      if (std::abs(s) < min_sin) continue;
-      const double gap = std::max(options.junction_gap_px,
-                                  0.25 * std::min(lines[static_cast<size_t>(i)].Length(), lines[static_cast<size_t>(j)].Length()));
-      for (int ei = 0; ei < 2; ++ei) {
-        const Eigen::Vector2d p = End(lines[static_cast<size_t>(i)], ei);
-        for (int ej = 0; ej < 2; ++ej) {
-          const Eigen::Vector2d q = End(lines[static_cast<size_t>(j)], ej);
-          if ((p - q).squaredNorm() > 4 * gap * gap) continue;
-          const double t = Cross2(q - p, dj) / s;
-          const Eigen::Vector2d x = p + t * di;
-          if ((x - p).norm() > gap || (x - q).norm() > gap) continue;
-          ImageCorner c;
-          c.point = x;
-          c.arm_end = {End(lines[static_cast<size_t>(i)], 1 - ei), End(lines[static_cast<size_t>(j)], 1 - ej)};
-          c.segments = {i, j};
-          corners.push_back(c);
-        }
-      }
-    }
+  for (const LineJunction& j : FindJunctions(joined.extent, options.junction_gap_px, representative)) {
+    ImageCorner c;
+    c.point = j.point;
+    c.arm_end = {End(joined.extent[static_cast<size_t>(j.first)], 1 - j.first_end),
+                 End(joined.extent[static_cast<size_t>(j.second)], 1 - j.second_end)};
+    c.segments = {j.first, j.second};
+    corners.push_back(c);
   }
   return corners;
 }

@@ -429,6 +429,147 @@ TEST(HypothesisFitTest, MatchEdgesFindsWhatTestingEveryLineAgainstEveryEdgeFinds
   }
 }
 
+// Random lines for the pair searches below: pieces of edges split at random (collinear within a
+// few degrees, some across the 0/180 deg wrap of directions), L junctions with gaps, and lines
+// anywhere, 2-300 px long; one far off, one of zero length, one not finite.
+std::vector<ImageLine> PairSearchLines(unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<ImageLine> lines;
+  const Eigen::Vector2d size(640, 480);
+  for (int k = 0; k < 120; ++k) {
+    const Eigen::Vector2d start(size.x() * u(rng), size.y() * u(rng));
+    const double angle = k % 4 == 0 ? 0.03 * (u(rng) - 0.5) + (u(rng) < 0.5 ? 0 : M_PI) : 2 * M_PI * u(rng);
+    const Eigen::Vector2d dir(std::cos(angle), std::sin(angle)), normal(-dir.y(), dir.x());
+    const double length = 2 + 298 * u(rng);
+    switch (k % 3) {
+      case 0: {  // an edge in pieces: gaps up to 60 px, up to 2 px and 4 deg off its line
+        double t = 0;
+        for (int piece = 0; piece < 4; ++piece) {
+          const double piece_length = 5 + 60 * u(rng);
+          const Eigen::Vector2d turned = Eigen::Rotation2Dd(0.07 * (u(rng) - 0.5)) * dir;
+          const Eigen::Vector2d a = start + t * dir + 2 * (u(rng) - 0.5) * normal;
+          lines.push_back({a, a + piece_length * turned});
+          t += piece_length + 60 * u(rng);
+        }
+        break;
+      }
+      case 1: {  // an L junction: the second line starts up to 20 px from the first's end
+        const Eigen::Vector2d b = start + length * dir;
+        const Eigen::Vector2d turned = Eigen::Rotation2Dd(0.3 + 2.5 * u(rng)) * dir;
+        const Eigen::Vector2d c = b + 20 * Eigen::Vector2d(u(rng) - 0.5, u(rng) - 0.5);
+        lines.push_back({start, b});
+        lines.push_back({c, c + (2 + 298 * u(rng)) * turned});
+        break;
+      }
+      default:
+        lines.push_back({start, start + length * dir});
+    }
+  }
+  lines.push_back({Eigen::Vector2d(1e7, -3e6), Eigen::Vector2d(1e7 + 40, -3e6 + 30)});
+  lines.push_back({Eigen::Vector2d(100, 100), Eigen::Vector2d(100, 100)});
+  lines.push_back({Eigen::Vector2d(std::nan(""), 100), Eigen::Vector2d(120, 100)});
+  std::shuffle(lines.begin(), lines.end(), rng);
+  return lines;
+}
+
+// FindJunctions looks only at the lines with an end near one of each line's ends: it finds what
+// testing every pair finds, in the same order, for any gap and any set of lines considered; a
+// line with an end that is not finite meets none.
+TEST(HypothesisFitTest, JunctionsAreThoseOfTestingEveryPair) {
+  for (const unsigned seed : {1u, 2u, 3u}) {
+    const std::vector<ImageLine> lines = PairSearchLines(seed);
+    std::vector<char> some(lines.size());
+    for (size_t i = 0; i < lines.size(); ++i) some[i] = i % 3 != 0;
+    for (const double gap : {4.0, 12.0, 40.0}) {
+      for (const std::vector<char>& considered : {std::vector<char>{}, some}) {
+        const std::vector<LineJunction> found = FindJunctions(lines, gap, considered);
+        std::vector<LineJunction> all;
+        const int n = static_cast<int>(lines.size());
+        auto takes_part = [&](int i) {
+          const ImageLine& l = lines[static_cast<size_t>(i)];
+          return (considered.empty() || considered[static_cast<size_t>(i)] != 0) && l.a.allFinite() &&
+                 l.b.allFinite();
+        };
+        for (int i = 0; i < n; ++i) {
+          for (int j = i + 1; j < n; ++j) {
+            if (!takes_part(i) || !takes_part(j)) continue;
+            const ImageLine &li = lines[static_cast<size_t>(i)], &lj = lines[static_cast<size_t>(j)];
+            const Eigen::Vector2d di = (li.b - li.a).normalized(), dj = (lj.b - lj.a).normalized();
+            const double s = Cross2(di, dj);
+            if (std::abs(s) < std::sin(15.0 * M_PI / 180)) continue;
+            const double g = std::max(gap, 0.25 * std::min(li.Length(), lj.Length()));
+            for (int ei = 0; ei < 2; ++ei) {
+              for (int ej = 0; ej < 2; ++ej) {
+                const Eigen::Vector2d p = ei == 0 ? li.a : li.b, q = ej == 0 ? lj.a : lj.b;
+                const Eigen::Vector2d x = p + Cross2(q - p, dj) / s * di;
+                if ((p - q).squaredNorm() <= 4 * g * g && (x - p).norm() <= g && (x - q).norm() <= g) {
+                  all.push_back({i, ei, j, ej, x});
+                }
+              }
+            }
+          }
+        }
+        ASSERT_EQ(found.size(), all.size()) << "seed " << seed << " gap " << gap;
+        for (size_t k = 0; k < all.size(); ++k) {
+          EXPECT_EQ(found[k].first, all[k].first);
+          EXPECT_EQ(found[k].first_end, all[k].first_end);
+          EXPECT_EQ(found[k].second, all[k].second);
+          EXPECT_EQ(found[k].second_end, all[k].second_end);
+          EXPECT_EQ(found[k].point, all[k].point);
+        }
+        EXPECT_GT(all.size(), considered.empty() ? 80u : 30u) << "seed " << seed << " gap " << gap;
+      }
+    }
+  }
+}
+
+// JoinCollinearLines tests each line only against those of nearly its direction: it joins what
+// testing every pair joins (with the same longest piece and extent), across the 0/180 deg wrap too.
+TEST(HypothesisFitTest, JoiningCollinearPiecesTriesEveryPairThatCanJoin) {
+  for (const unsigned seed : {1u, 2u, 3u}) {
+    const std::vector<ImageLine> lines = PairSearchLines(seed);
+    const int n = static_cast<int>(lines.size());
+    // Every pair: collinear within 3 deg and 1.5 px, at most 40 px apart along the longer line.
+    std::vector<int> parent(static_cast<size_t>(n));
+    for (int i = 0; i < n; ++i) parent[static_cast<size_t>(i)] = i;
+    auto find = [&](int i) {
+      while (parent[static_cast<size_t>(i)] != i) i = parent[static_cast<size_t>(i)];
+      return i;
+    };
+    for (int i = 0; i < n; ++i) {
+      for (int j = i + 1; j < n; ++j) {
+        const ImageLine &li = lines[static_cast<size_t>(i)], &lj = lines[static_cast<size_t>(j)];
+        if (!(li.Length() >= 1e-9 && lj.Length() >= 1e-9) || !li.a.allFinite() || !li.b.allFinite() ||
+            !lj.a.allFinite() || !lj.b.allFinite()) {
+          continue;
+        }
+        const Eigen::Vector2d di = (li.b - li.a) / li.Length();
+        if (std::abs(di.dot((lj.b - lj.a) / lj.Length())) < std::cos(3 * M_PI / 180)) continue;
+        const ImageLine& longer = li.Length() >= lj.Length() ? li : lj;
+        const ImageLine& shorter = li.Length() >= lj.Length() ? lj : li;
+        const Eigen::Vector2d dl = (longer.b - longer.a).normalized(), nl(-dl.y(), dl.x());
+        if (std::abs(nl.dot(shorter.a - longer.a)) > 1.5 || std::abs(nl.dot(shorter.b - longer.a)) > 1.5)
+          continue;
+        const double ta = di.dot(lj.a - li.a), tb = di.dot(lj.b - li.a);
+        if (std::max(std::min(ta, tb) - li.Length(), -std::max(ta, tb)) > 40) continue;
+        parent[static_cast<size_t>(find(j))] = find(i);
+      }
+    }
+    const JoinedLines joined = JoinCollinearLines(lines);
+    int in_joins = 0;
+    for (int i = 0; i < n; ++i) {
+      for (int j = 0; j < n; ++j) {
+        const bool together =
+            joined.representative[static_cast<size_t>(i)] == joined.representative[static_cast<size_t>(j)];
+        ASSERT_EQ(together, find(i) == find(j)) << "seed " << seed << " lines " << i << " " << j;
+      }
+      in_joins += joined.representative[static_cast<size_t>(i)] != i;
+    }
+    EXPECT_GT(in_joins, 40) << "seed " << seed;
+  }
+}
+
 // The part of each line inside the image (Liang-Barsky clipping; the synthetic camera has no
 // distortion): what a detector finds of edges cut by the image border.
 std::vector<ImageLine> ClippedToImage(const std::vector<ImageLine>& lines, const Camera& camera) {

@@ -132,6 +132,17 @@ struct Group {
 // The index vector: turn angles (rad) and logarithms of length ratios (weighted); invariant to 2D
 // translation, rotation and scale, not to reflection.
 std::vector<float> IndexVector(const Group& group);
+// Junctions: the ends of two lines (first < second) meeting where the lines' intersection lies
+// within the gap of both ends, the gap being junction_gap_px or a quarter of the shorter line,
+// whichever is larger, at an angle over 15 deg. In the order of a loop over the pairs (first, then
+// second ascending), then first_end, second_end. Only the lines with considered[i] != 0 (all when
+// empty) and finite ends take part.
+struct LineJunction {
+  int first = 0, first_end = 0, second = 0, second_end = 0;  // lines and their ends (0: a, 1: b)
+  Eigen::Vector2d point = Eigen::Vector2d::Zero();           // where the two lines meet, px
+};
+std::vector<LineJunction> FindJunctions(const std::vector<ImageLine>& lines, double junction_gap_px,
+                                        const std::vector<char>& considered = {});
 // Connected groups in the image: segments whose ends meet at a junction (line intersection within
 // options.junction_gap_px of both ends, at an angle > 15 deg). At most max_groups per kind.
 std::vector<Group> FindGroups(const std::vector<ImageLine>& lines, const RecognizerOptions& options,
