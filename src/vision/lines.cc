@@ -180,13 +180,16 @@ std::vector<ImageLine> MergeCollinear(std::vector<ImageLine> lines) {
 // The gradient magnitude of the image in linear light (internal::LinearLight), through the same
 // Gaussian and Sobel as the lines'.
 cv::Mat LinearMagnitudeImage(const cv::Mat& image_gray8, double gamma) {
-  const cv::Mat linear = internal::LinearLight(image_gray8, gamma);
-  cv::Mat blurred, dx, dy, magnitude;
-  cv::GaussianBlur(linear, blurred, cv::Size(5, 5), 1.0);
-  cv::Sobel(blurred, dx, CV_32F, 1, 0, 3);
+  // Three float images, not five: the x derivative goes where the linear light was (no longer
+  // needed after the blur), and the magnitude where the x derivative was. The same values (each
+  // step reads nothing it overwrites); 2.5 MB fewer fresh pages at 640 x 480.
+  cv::Mat values = internal::LinearLight(image_gray8, gamma);
+  cv::Mat blurred, dy;
+  cv::GaussianBlur(values, blurred, cv::Size(5, 5), 1.0);
+  cv::Sobel(blurred, values, CV_32F, 1, 0, 3);
   cv::Sobel(blurred, dy, CV_32F, 0, 1, 3);
-  cv::magnitude(dx, dy, magnitude);
-  return magnitude;
+  cv::magnitude(values, dy, values);
+  return values;
 }
 
 }  // namespace

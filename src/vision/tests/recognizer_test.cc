@@ -195,8 +195,22 @@ TEST(PoseFitTest, PolishOnAGammaEncodedImageNeedsTheCamerasGamma) {
       const PolishResult polished = PolishPose(bar, *runs[r].second, runs[r].second->camera_T_world() * start,
                                                detection.edge_map, /*on_plane=*/true);
       ASSERT_TRUE(polished.ok) << "trial " << trial << " run " << r;
-      // A linear camera's edge map computes no second magnitude image.
+      // A linear camera's edge map computes no second magnitude image; the gamma camera's is that
+      // of the blurred linear light's Sobel derivatives, to the bit.
       EXPECT_EQ(detection.edge_map.linear_magnitude.empty(), r < 2);
+      if (r == 2) {
+        cv::Mat light, blurred, dx, dy, magnitude;
+        encoded.convertTo(light, CV_32F);
+        light.forEach<float>([](float& v, const int*) {
+          v = static_cast<float>(255.0 * std::pow(static_cast<double>(v) / 255.0, 2.2));
+        });
+        cv::GaussianBlur(light, blurred, cv::Size(5, 5), 1.0);
+        cv::Sobel(blurred, dx, CV_32F, 1, 0, 3);
+        cv::Sobel(blurred, dy, CV_32F, 0, 1, 3);
+        cv::magnitude(dx, dy, magnitude);
+        ASSERT_EQ(detection.edge_map.linear_magnitude.size(), magnitude.size());
+        EXPECT_EQ(cv::norm(detection.edge_map.linear_magnitude, magnitude, cv::NORM_INF), 0.0);
+      }
       const geometry::Pose3 world_T_bar = runs[r].second->world_T_camera() * polished.fit.camera_T_object;
       error_told[r] += SymmetricRotationAngle(bar, world_T_bar, truth) * 180 / M_PI / kTrials;
       position_told[r] += (world_T_bar.translation - truth.translation).norm() * 1000 / kTrials;
