@@ -313,23 +313,15 @@ std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::V
   // nearest pixel by floor(v + 0.5), and the unit gradient from the Sobel images (no trigonometry).
   static const float cos_tol = static_cast<float>(std::cos(25 * M_PI / 180));
   const int cols = edge_map.edges.cols, rows = edge_map.edges.rows;
-  // The nearest pixel, floor(v + 0.5), where it lies in [0, size), else -1: for v + 0.5 >= 0
-  // truncation is the floor (cheaper than std::floor without SSE4.1); below 0 it is outside anyway.
-  auto nearest = [](double v, int size) {
-    const double t = v + 0.5;
-    return t >= 0 && t < size ? static_cast<int>(t) : -1;
-  };
   // Every pixel looked at below lies within max_offset_px of the nearest one in x and y (floor(v + d
   // + 0.5) - floor(v + 0.5) is within [-2, 2] for |d| <= 2): where the dilated edges show none
   // around it, there is none (most samples of a wrong pose, and the answer is the same).
-  if (edge_map.near.data != nullptr && max_offset_px <= kEdgeNearPx) {
-    const int x0 = nearest(pixel.x(), cols), y0 = nearest(pixel.y(), rows);
-    if (x0 >= 0 && y0 >= 0 && !NearEdge(edge_map, x0, y0)) return std::nullopt;
-  }
+  if (max_offset_px <= kEdgeNearPx && NoEdgeNear(edge_map, pixel)) return std::nullopt;
   const float nx = static_cast<float>(normal.x()), ny = static_cast<float>(normal.y());
   for (int o = 0; o <= 2 * max_offset_px; ++o) {
     const int offset = (o + 1) / 2 * (o % 2 ? 1 : -1);
-    const int x = nearest(pixel.x() + offset * normal.x(), cols), y = nearest(pixel.y() + offset * normal.y(), rows);
+    const int x = NearestPixel(pixel.x() + offset * normal.x(), cols);
+    const int y = NearestPixel(pixel.y() + offset * normal.y(), rows);
     if (x < 0 || y < 0) continue;
     if (edge_map.edges.ptr<uint8_t>(y)[x] != kEdgeOnChain) continue;
     const auto unit = UnitGradient(edge_map, x, y);

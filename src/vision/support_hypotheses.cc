@@ -86,10 +86,20 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera,
   const int count = static_cast<int>(samples.size());
   if (count < 8) return 0;
   const int needed = static_cast<int>(std::ceil(min_score * count - 1e-9));
-  int supported = 0;
+  // First the cheap answers: the samples with no edge pixel near (a look at the dilated edges) are
+  // unsupported, and a pose whose other samples are too few is done with before any search
+  // along a normal (most poses are wrong). Then the search, at the samples that may have support.
+  thread_local std::vector<int> maybe;
+  maybe.clear();
   for (int i = 0; i < count; ++i) {
-    if (supported + (count - i) < needed) return 0;
-    if (EdgeAcross(edge_map, samples[static_cast<size_t>(i)].at, samples[static_cast<size_t>(i)].normal)) ++supported;
+    if (!NoEdgeNear(edge_map, samples[static_cast<size_t>(i)].at)) maybe.push_back(i);
+  }
+  if (static_cast<int>(maybe.size()) < needed) return 0;
+  int supported = 0;
+  for (size_t k = 0; k < maybe.size(); ++k) {
+    if (supported + static_cast<int>(maybe.size() - k) < needed) return 0;
+    const OutlineSample& sample = samples[static_cast<size_t>(maybe[k])];
+    if (EdgeAcross(edge_map, sample.at, sample.normal)) ++supported;
   }
   return static_cast<double>(supported) / count;
 }

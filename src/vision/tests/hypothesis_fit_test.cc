@@ -750,10 +750,10 @@ TEST(HypothesisFitTest, NearEdgeBitsAreTheDilatedEdgesPacked) {
   EXPECT_GT(clear_bits, 10000);
 }
 
-// EdgePixelAcross first looks at the dilated edges (EdgeMap::near, kEdgeNearPx in x and y) and
-// answers "none" where no edge pixel lies near: the same answer as looking along the normal pixel by
-// pixel, for points anywhere in the image (on edges, beside them, on blank table) and normals in
-// every direction, the image's axes included.
+// EdgePixelAcross (and QuickSupport, by NoEdgeNear) first looks at the dilated edges
+// (EdgeMap::near, kEdgeNearPx in x and y) and answers "none" where no edge pixel lies near: the
+// same answer as looking along the normal pixel by pixel, for points anywhere in the image (on
+// edges, beside them, on blank table) and normals in every direction, the image's axes included.
 TEST(HypothesisFitTest, TheDilatedEdgesAnswerEdgeQueriesAsTheEdgesDo) {
   const Camera camera = SyntheticCamera();
   const Model bar = Bar();
@@ -791,8 +791,13 @@ TEST(HypothesisFitTest, TheDilatedEdgesAnswerEdgeQueriesAsTheEdgesDo) {
       }
     }
     const int cx = static_cast<int>(std::floor(pixel.x() + 0.5)), cy = static_cast<int>(std::floor(pixel.y() + 0.5));
-    if (cx < 0 || cy < 0 || cx >= camera.width() || cy >= camera.height()) continue;
-    if (!NearEdge(detection.edge_map, cx, cy)) {
+    const bool inside = cx >= 0 && cy >= 0 && cx < camera.width() && cy < camera.height();
+    // NoEdgeNear, the support scores' first look, tells where no search finds an edge pixel.
+    ASSERT_EQ(NoEdgeNear(detection.edge_map, pixel), inside && !NearEdge(detection.edge_map, cx, cy));
+    EXPECT_FALSE(NoEdgeNear(plain, pixel));
+    if (!inside) continue;
+    if (NoEdgeNear(detection.edge_map, pixel)) {
+      ASSERT_FALSE(EdgePixelAcross(plain, pixel, normal, kEdgeNearPx));
       ++blank;
     } else if (!EdgePixelAcross(plain, pixel, normal, kEdgeNearPx)) {
       ++beside;

@@ -82,6 +82,22 @@ cv::Mat NearEdgeBits(const cv::Mat& edges);
 inline bool NearEdge(const EdgeMap& edge_map, int x, int y) {
   return (edge_map.near.ptr<uint8_t>(y)[x >> 3] >> (x & 7) & 1) != 0;
 }
+// The nearest pixel to coordinate v, floor(v + 0.5), where it lies in [0, size), else -1: for
+// v + 0.5 >= 0 truncation is the floor (cheaper than std::floor without SSE4.1); below 0 it is
+// outside anyway.
+inline int NearestPixel(double v, int size) {
+  const double t = v + 0.5;
+  return t >= 0 && t < size ? static_cast<int>(t) : -1;
+}
+// Whether the dilated edges (EdgeMap::near) show no edge pixel around the pixel nearest `pixel`
+// (distorted image): then EdgePixelAcross finds none there up to kEdgeNearPx, whatever the normal.
+// False where it cannot tell (no EdgeMap::near, or the nearest pixel outside the image).
+inline bool NoEdgeNear(const EdgeMap& edge_map, const Eigen::Vector2d& pixel) {
+  if (edge_map.near.data == nullptr) return false;
+  const int x0 = NearestPixel(pixel.x(), edge_map.edges.cols),
+            y0 = NearestPixel(pixel.y(), edge_map.edges.rows);
+  return x0 >= 0 && y0 >= 0 && !NearEdge(edge_map, x0, y0);
+}
 // The z component of the cross product of two image vectors.
 inline double Cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
   return a.x() * b.y() - a.y() * b.x();
