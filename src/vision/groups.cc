@@ -132,15 +132,25 @@ std::vector<LineJunction> FindJunctions(const std::vector<ImageLine>& lines, dou
   }
   std::vector<LineJunction> out;
   if (!(lo.x() <= hi.x())) return out;
-  // At most 1001 cells a side: a far-flung end makes the cells larger, never the grid.
+  // At most 1001 cells a side, and not many more cells than ends: a far-flung end makes the cells
+  // larger, never the grid. Cell indices are clamped to the grid (a huge or infinite reach, or
+  // cells made infinite by ends ~1e308 apart, falls into the border or the one cell).
+  int ends = 0;
+  for (int i = 0; i < n; ++i) ends += take_part(i) ? 2 : 0;
   const Eigen::Vector2d extent = hi - lo;
-  const double cell_px = std::max(cell, extent.maxCoeff() / 1000);
-  const int nx = static_cast<int>(extent.x() / cell_px) + 1, ny = static_cast<int>(extent.y() / cell_px) + 1;
+  const double cell_px =
+      std::max({cell, extent.maxCoeff() / 1000, std::sqrt(extent.x() * extent.y() / (4.0 * ends))});
+  auto clamped = [](double c, int cells) {
+    return !(c > 0) ? 0 : c >= cells - 1 ? cells - 1 : static_cast<int>(c);
+  };
+  const int nx = clamped(std::floor(extent.x() / cell_px), 1001) + 1;
+  const int ny = clamped(std::floor(extent.y() / cell_px), 1001) + 1;
   auto cell_of = [&](double v, double origin, int cells) {
-    return static_cast<int>(std::clamp(std::floor((v - origin) / cell_px), 0.0, cells - 1.0));
+    return clamped(std::floor((v - origin) / cell_px), cells);
   };
   // The ends in each cell (line indices), compressed rows.
-  std::vector<int> first(static_cast<size_t>(nx) * ny + 1, 0), members;
+  std::vector<int> first(static_cast<size_t>(nx) * ny + 1, 0);
+  std::vector<int> members;
   auto cell_index = [&](const Eigen::Vector2d& p) {
     return static_cast<size_t>(cell_of(p.y(), lo.y(), ny)) * nx +
            static_cast<size_t>(cell_of(p.x(), lo.x(), nx));

@@ -91,10 +91,13 @@ double QuickSupport(const Eigen::Vector3d& size_m, const Camera& camera,
   // along a normal (most poses are wrong). Then the search, at the samples that may have support.
   thread_local std::vector<int> maybe;
   maybe.clear();
-  for (int i = 0; i < count; ++i) {
-    if (!NoEdgeNear(edge_map, samples[static_cast<size_t>(i)].at)) maybe.push_back(i);
+  for (int i = 0, blank = 0; i < count; ++i) {
+    if (!NoEdgeNear(edge_map, samples[static_cast<size_t>(i)].at)) {
+      maybe.push_back(i);
+    } else if (count - ++blank < needed) {
+      return 0;
+    }
   }
-  if (static_cast<int>(maybe.size()) < needed) return 0;
   int supported = 0;
   for (size_t k = 0; k < maybe.size(); ++k) {
     if (supported + static_cast<int>(maybe.size() - k) < needed) return 0;

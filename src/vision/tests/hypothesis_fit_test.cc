@@ -431,8 +431,9 @@ TEST(HypothesisFitTest, MatchEdgesFindsWhatTestingEveryLineAgainstEveryEdgeFinds
 
 // Random lines for the pair searches below: pieces of edges split at random (collinear within a
 // few degrees, some across the 0/180 deg wrap of directions), L junctions with gaps, and lines
-// anywhere, 2-300 px long; one far off, one of zero length, one not finite.
-std::vector<ImageLine> PairSearchLines(unsigned seed) {
+// anywhere, 2-300 px long; one of zero length, one not finite, and, with far_line, one far off
+// (which makes the grid's cells large).
+std::vector<ImageLine> PairSearchLines(unsigned seed, bool far_line) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> u(0, 1);
   std::vector<ImageLine> lines;
@@ -466,7 +467,7 @@ std::vector<ImageLine> PairSearchLines(unsigned seed) {
         lines.push_back({start, start + length * dir});
     }
   }
-  lines.push_back({Eigen::Vector2d(1e7, -3e6), Eigen::Vector2d(1e7 + 40, -3e6 + 30)});
+  if (far_line) lines.push_back({Eigen::Vector2d(1e7, -3e6), Eigen::Vector2d(1e7 + 40, -3e6 + 30)});
   lines.push_back({Eigen::Vector2d(100, 100), Eigen::Vector2d(100, 100)});
   lines.push_back({Eigen::Vector2d(std::nan(""), 100), Eigen::Vector2d(120, 100)});
   std::shuffle(lines.begin(), lines.end(), rng);
@@ -477,8 +478,8 @@ std::vector<ImageLine> PairSearchLines(unsigned seed) {
 // testing every pair finds, in the same order, for any gap and any set of lines considered; a
 // line with an end that is not finite meets none.
 TEST(HypothesisFitTest, JunctionsAreThoseOfTestingEveryPair) {
-  for (const unsigned seed : {1u, 2u, 3u}) {
-    const std::vector<ImageLine> lines = PairSearchLines(seed);
+  for (const unsigned seed : {1u, 2u, 3u, 4u, 5u, 6u}) {
+    const std::vector<ImageLine> lines = PairSearchLines(seed, seed > 3);
     std::vector<char> some(lines.size());
     for (size_t i = 0; i < lines.size(); ++i) some[i] = i % 3 != 0;
     for (const double gap : {4.0, 12.0, 40.0}) {
@@ -525,10 +526,11 @@ TEST(HypothesisFitTest, JunctionsAreThoseOfTestingEveryPair) {
 }
 
 // JoinCollinearLines tests each line only against those of nearly its direction: it joins what
-// testing every pair joins (with the same longest piece and extent), across the 0/180 deg wrap too.
+// testing every pair joins (the same pieces, which fixes the longest piece and the extent), across
+// the 0/180 deg wrap too.
 TEST(HypothesisFitTest, JoiningCollinearPiecesTriesEveryPairThatCanJoin) {
   for (const unsigned seed : {1u, 2u, 3u}) {
-    const std::vector<ImageLine> lines = PairSearchLines(seed);
+    const std::vector<ImageLine> lines = PairSearchLines(seed, true);
     const int n = static_cast<int>(lines.size());
     // Every pair: collinear within 3 deg and 1.5 px, at most 40 px apart along the longer line.
     std::vector<int> parent(static_cast<size_t>(n));

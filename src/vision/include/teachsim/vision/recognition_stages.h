@@ -90,8 +90,8 @@ inline int NearestPixel(double v, int size) {
   return t >= 0 && t < size ? static_cast<int>(t) : -1;
 }
 // Whether the dilated edges (EdgeMap::near) show no edge pixel around the pixel nearest `pixel`
-// (distorted image): then EdgePixelAcross finds none there up to kEdgeNearPx, whatever the normal.
-// False where it cannot tell (no EdgeMap::near, or the nearest pixel outside the image).
+// (distorted image): then EdgePixelAcross finds none there up to kEdgeNearPx, whatever the unit
+// normal. False where it cannot tell (no EdgeMap::near, or the nearest pixel outside the image).
 inline bool NoEdgeNear(const EdgeMap& edge_map, const Eigen::Vector2d& pixel) {
   if (edge_map.near.data == nullptr) return false;
   const int x0 = NearestPixel(pixel.x(), edge_map.edges.cols),
@@ -150,7 +150,7 @@ struct Group {
 std::vector<float> IndexVector(const Group& group);
 // Junctions: the ends of two lines (first < second) meeting where the lines' intersection lies
 // within the gap of both ends, the gap being junction_gap_px or a quarter of the shorter line,
-// whichever is larger, at an angle over 15 deg. In the order of a loop over the pairs (first, then
+// whichever is larger, at an angle of 15 deg or more. In the order of a loop over the pairs (first, then
 // second ascending), then first_end, second_end. Only the lines with considered[i] != 0 (all when
 // empty) and finite ends take part.
 struct LineJunction {
