@@ -98,19 +98,19 @@ struct Junction {
   Eigen::Vector2d point;     // where the two lines meet, px
 };
 
-Eigen::Vector2d End(const ImageLine& l, int end) { return end == 0 ? l.a : l.b; }
-
 }  // namespace
 
 std::vector<LineJunction> FindJunctions(const std::vector<ImageLine>& lines, double junction_gap_px,
                                         const std::vector<char>& considered) {
   const int n = static_cast<int>(lines.size());
   const double min_sin = std::sin(15.0 * M_PI / 180);
-  auto take_part = [&](int i) {
+  std::vector<char> part(static_cast<size_t>(n));  // the lines that take part
+  for (int i = 0; i < n; ++i) {
     const ImageLine& l = lines[static_cast<size_t>(i)];
-    return (considered.empty() || considered[static_cast<size_t>(i)] != 0) && l.a.allFinite() &&
-           l.b.allFinite();
-  };
+    part[static_cast<size_t>(i)] =
+        (considered.empty() || considered[static_cast<size_t>(i)] != 0) && l.a.allFinite() && l.b.allFinite();
+  }
+  auto take_part = [&](int i) { return part[static_cast<size_t>(i)] != 0; };
   std::vector<Eigen::Vector2d> dir(static_cast<size_t>(n));
   std::vector<double> length(static_cast<size_t>(n));
   for (int i = 0; i < n; ++i) {
@@ -157,7 +157,7 @@ std::vector<LineJunction> FindJunctions(const std::vector<ImageLine>& lines, dou
   };
   for (int i = 0; i < n; ++i) {
     if (!take_part(i)) continue;
-    for (int e = 0; e < 2; ++e) ++first[cell_index(End(lines[static_cast<size_t>(i)], e)) + 1];
+    for (int e = 0; e < 2; ++e) ++first[cell_index(LineEnd(lines[static_cast<size_t>(i)], e)) + 1];
   }
   for (size_t c = 1; c < first.size(); ++c) first[c] += first[c - 1];
   members.resize(static_cast<size_t>(first.back()));
@@ -166,7 +166,7 @@ std::vector<LineJunction> FindJunctions(const std::vector<ImageLine>& lines, dou
     for (int i = 0; i < n; ++i) {
       if (!take_part(i)) continue;
       for (int e = 0; e < 2; ++e)
-        members[static_cast<size_t>(fill[cell_index(End(lines[static_cast<size_t>(i)], e))]++)] = i;
+        members[static_cast<size_t>(fill[cell_index(LineEnd(lines[static_cast<size_t>(i)], e))]++)] = i;
     }
   }
 
@@ -179,7 +179,7 @@ std::vector<LineJunction> FindJunctions(const std::vector<ImageLine>& lines, dou
     const double reach = 2 * std::max(junction_gap_px, 0.25 * length[static_cast<size_t>(i)]) + 1;
     near.clear();
     for (int ei = 0; ei < 2; ++ei) {
-      const Eigen::Vector2d p = End(lines[static_cast<size_t>(i)], ei);
+      const Eigen::Vector2d p = LineEnd(lines[static_cast<size_t>(i)], ei);
       const int x0 = cell_of(p.x() - reach, lo.x(), nx), x1 = cell_of(p.x() + reach, lo.x(), nx);
       const int y0 = cell_of(p.y() - reach, lo.y(), ny), y1 = cell_of(p.y() + reach, lo.y(), ny);
       for (int y = y0; y <= y1; ++y) {
@@ -199,9 +199,9 @@ std::vector<LineJunction> FindJunctions(const std::vector<ImageLine>& lines, dou
       const double gap = std::max(
           junction_gap_px, 0.25 * std::min(length[static_cast<size_t>(i)], length[static_cast<size_t>(j)]));
       for (int ei = 0; ei < 2; ++ei) {
-        const Eigen::Vector2d p = End(lines[static_cast<size_t>(i)], ei);
+        const Eigen::Vector2d p = LineEnd(lines[static_cast<size_t>(i)], ei);
         for (int ej = 0; ej < 2; ++ej) {
-          const Eigen::Vector2d q = End(lines[static_cast<size_t>(j)], ej);
+          const Eigen::Vector2d q = LineEnd(lines[static_cast<size_t>(j)], ej);
           if ((p - q).squaredNorm() > 4 * gap * gap) continue;
           // Intersection of the two lines: p + t di = q + u dj.
           const double t = Cross2(q - p, dj) / s;
@@ -245,7 +245,7 @@ std::vector<Group> FindGroups(const std::vector<ImageLine>& lines, const Recogni
       g.points[static_cast<size_t>(k)] = path[static_cast<size_t>(k)].entry_point;
     }
     const Step& last = path.back();
-    g.points[static_cast<size_t>(m)] = End(lines[static_cast<size_t>(last.segment)], 1 - last.entry_end);
+    g.points[static_cast<size_t>(m)] = LineEnd(lines[static_cast<size_t>(last.segment)], 1 - last.entry_end);
     groups.push_back(g);
     ++count;
   };
@@ -269,7 +269,7 @@ std::vector<Group> FindGroups(const std::vector<ImageLine>& lines, const Recogni
   for (int i = 0; i < n; ++i) {
     for (int e = 0; e < 2; ++e) {
       path.clear();
-      path.push_back({i, e, End(lines[static_cast<size_t>(i)], e)});
+      path.push_back({i, e, LineEnd(lines[static_cast<size_t>(i)], e)});
       extend(extend);
     }
   }
@@ -294,7 +294,7 @@ std::vector<Group> FindGroups(const std::vector<ImageLine>& lines, const Recogni
           const int ends[3] = {ei, x.end, y.end};
           Eigen::Vector2d far[3];
           for (int k = 0; k < 3; ++k) {
-            far[k] = End(lines[static_cast<size_t>(segs[k])], 1 - ends[k]);
+            far[k] = LineEnd(lines[static_cast<size_t>(segs[k])], 1 - ends[k]);
             const Eigen::Vector2d u = far[k] - g.points[0];
             arms[static_cast<size_t>(k)] = {std::atan2(u.y(), u.x()), k};
           }

@@ -20,8 +20,6 @@ namespace teachsim::vision {
 
 namespace {
 
-Eigen::Vector2d End(const ImageLine& l, int end) { return end == 0 ? l.a : l.b; }
-
 // Sample points along the visible predicted edges of a box (projected with the lens, straight
 // between the projected vertices, or the ends of an edge's part in view), every spacing_px, the
 // edges' ends left out, those inside the image. With K, each sample's pin-hole (undistorted) pixel
@@ -300,8 +298,8 @@ std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& input_lines, 
   for (const LineJunction& j : FindJunctions(joined.extent, options.junction_gap_px, representative)) {
     ImageCorner c;
     c.point = j.point;
-    c.arm_end = {End(joined.extent[static_cast<size_t>(j.first)], 1 - j.first_end),
-                 End(joined.extent[static_cast<size_t>(j.second)], 1 - j.second_end)};
+    c.arm_end = {LineEnd(joined.extent[static_cast<size_t>(j.first)], 1 - j.first_end),
+                 LineEnd(joined.extent[static_cast<size_t>(j.second)], 1 - j.second_end)};
     c.segments = {j.first, j.second};
     corners.push_back(c);
   }

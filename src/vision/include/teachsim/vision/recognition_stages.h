@@ -98,6 +98,8 @@ inline bool NoEdgeNear(const EdgeMap& edge_map, const Eigen::Vector2d& pixel) {
             y0 = NearestPixel(pixel.y(), edge_map.edges.rows);
   return x0 >= 0 && y0 >= 0 && !NearEdge(edge_map, x0, y0);
 }
+// End 0 (a) or 1 (b) of an image line.
+inline const Eigen::Vector2d& LineEnd(const ImageLine& line, int end) { return end == 0 ? line.a : line.b; }
 // The z component of the cross product of two image vectors.
 inline double Cross2(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
   return a.x() * b.y() - a.y() * b.x();
@@ -150,9 +152,9 @@ struct Group {
 std::vector<float> IndexVector(const Group& group);
 // Junctions: the ends of two lines (first < second) meeting where the lines' intersection lies
 // within the gap of both ends, the gap being junction_gap_px or a quarter of the shorter line,
-// whichever is larger, at an angle of 15 deg or more. In the order of a loop over the pairs (first, then
-// second ascending), then first_end, second_end. Only the lines with considered[i] != 0 (all when
-// empty) and finite ends take part.
+// whichever is larger, at an angle of 15 deg or more. In the order of a loop over the pairs (first,
+// then second ascending), then first_end, second_end. Only the lines with considered[i] != 0 (all
+// when empty) and finite ends take part.
 struct LineJunction {
   int first = 0, first_end = 0, second = 0, second_end = 0;  // lines and their ends (0: a, 1: b)
   Eigen::Vector2d point = Eigen::Vector2d::Zero();           // where the two lines meet, px
@@ -160,7 +162,8 @@ struct LineJunction {
 std::vector<LineJunction> FindJunctions(const std::vector<ImageLine>& lines, double junction_gap_px,
                                         const std::vector<char>& considered = {});
 // Connected groups in the image: segments whose ends meet at a junction (line intersection within
-// options.junction_gap_px of both ends, at an angle > 15 deg). At most max_groups per kind.
+// options.junction_gap_px of both ends, at an angle of 15 deg or more: FindJunctions). At most
+// max_groups per kind.
 std::vector<Group> FindGroups(const std::vector<ImageLine>& lines, const RecognizerOptions& options,
                               int max_groups_per_kind = 4000);
 
