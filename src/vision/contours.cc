@@ -9,6 +9,7 @@
 #include <limits>
 #include <vector>
 
+#include "teachsim/base/status.h"
 #include "teachsim/vision/recognition_stages.h"
 
 namespace teachsim::vision {
@@ -25,10 +26,15 @@ float SmoothedGrey(const cv::Mat& m, const Eigen::Vector2d& p) {
 
 std::vector<ImageLine> OccludingContours(const LineDetection& detection, const Camera& camera,
                                          const RecognizerOptions& options) {
+  return OccludingContours(detection, JoinCollinearLines(detection.lines), camera, options);
+}
+
+std::vector<ImageLine> OccludingContours(const LineDetection& detection, const JoinedLines& joined,
+                                         const Camera& camera, const RecognizerOptions& options) {
   constexpr int kProbes = 9;
   constexpr double kOffsetPx = 4.5;
+  TEACHSIM_CHECK(joined.representative.size() == detection.lines.size());
   const Eigen::Matrix3d K_inv = camera.K().inverse();
-  const JoinedLines joined = JoinCollinearLines(detection.lines);
   std::vector<ImageLine> out;
   for (size_t l = 0; l < detection.lines.size(); ++l) {
     if (joined.representative[l] != static_cast<int>(l)) continue;

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <cstring>
 #include <opencv2/imgproc.hpp>
+#include <utility>
 
 #include "sampling.h"
 #include "teachsim/vision/recognition_stages.h"
@@ -333,9 +334,16 @@ std::optional<EdgePixel> EdgePixelAcross(const EdgeMap& edge_map, const Eigen::V
   return std::nullopt;
 }
 
-double LineRidgeShare(const ImageLine& line, const Camera& camera, const EdgeMap& edge_map, double min_grey) {
+namespace {
+
+// LineRidgeShare's samples, each judged ridge or not, in order along the line until
+// `decided(ridges, counted, left)` (the counts so far, and the samples not yet looked at) says the
+// answer is known. The final counts, or those at which it stopped.
+template <typename Decided>
+std::pair<int, int> CountRidges(const ImageLine& line, const Camera& camera, const EdgeMap& edge_map,
+                                double min_grey, Decided decided) {
   const double length = line.Length();
-  if (!(length > 1)) return 0;
+  if (!(length > 1)) return {0, 0};
   const Eigen::Vector2d along = (line.b - line.a) / length;
   // The line found along a thin line is one of its flanks (Canny marks both): its darkest (or
   // brightest) grey within kCorePx, and the grey kSidePx beyond that point on either side.
@@ -343,6 +351,7 @@ double LineRidgeShare(const ImageLine& line, const Camera& camera, const EdgeMap
   const int n = std::max(3, static_cast<int>((1 - 2 * kEndShare) * length / kSpacingPx));
   int counted = 0, ridges = 0;
   for (int i = 0; i < n; ++i) {
+    if (decided(ridges, counted, n - i)) break;
     const Eigen::Vector2d u = line.a + (kEndShare + (1 - 2 * kEndShare) * (i + 0.5) / n) * (line.b - line.a);
     const Eigen::Vector2d c = camera.DistortPixel(u);
     if (!camera.InImage(c)) continue;
@@ -365,7 +374,36 @@ double LineRidgeShare(const ImageLine& line, const Camera& camera, const EdgeMap
     };
     ridges += thin(dark_at, darkest, true) || thin(bright_at, brightest, false);
   }
-  return counted > 0 ? static_cast<double>(ridges) / counted : 0;
+  return {ridges, counted};
+}
+
+double Share(int ridges, int counted) { return counted > 0 ? static_cast<double>(ridges) / counted : 0; }
+
+}  // namespace
+
+double LineRidgeShare(const ImageLine& line, const Camera& camera, const EdgeMap& edge_map, double min_grey) {
+  const auto [ridges, counted] =
+      CountRidges(line, camera, edge_map, min_grey, [](int, int, int) { return false; });
+  return Share(ridges, counted);
+}
+
+bool LineRidgeShareAtLeast(const ImageLine& line, const Camera& camera, const EdgeMap& edge_map,
+                           double min_grey, double share) {
+  // With `left` samples to come, the final share lies between ridges / (counted + left) (none of
+  // them a ridge) and (ridges + left) / (counted + left) (all of them); leaving a sample out of the
+  // count (off the image) keeps it within. Rounding a quotient is monotonic: where a bound already
+  // decides the comparison, the final share, computed the same way, decides it alike.
+  bool answer = false, early = false;
+  const auto [ridges, counted] = CountRidges(line, camera, edge_map, min_grey, [&](int r, int c, int left) {
+    const double most = static_cast<double>(r + left) / (c + left);
+    const double least = static_cast<double>(r) / (c + left);
+    if (most < share)
+      answer = false, early = true;
+    else if (least >= share && c > 0)
+      answer = true, early = true;
+    return early;
+  });
+  return early ? answer : Share(ridges, counted) >= share;
 }
 
 int EdgeSign(const EdgePixel& edge, const Eigen::Vector2d& normal) {

@@ -1792,9 +1792,11 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   if (options_.support_hypotheses) {
     const std::vector<SupportPlane> planes = SupportPlanes(fixed, options_);
     const auto ts = Clock::now();
-    const std::vector<ImageCorner> corners = FindCorners(lines, options_);
+    // The pieces of each straight edge joined once, for the corners and the occluding contours.
+    const JoinedLines joined = JoinCollinearLines(lines);
+    const std::vector<ImageCorner> corners = FindCorners(joined, options_);
     if (options_.occlusion_reverify && options_.occlusion_contours) {
-      contours = OccludingContours(detection, camera, options_);
+      contours = OccludingContours(detection, joined, camera, options_);
       contours_found = true;
     }
     const std::vector<SupportHypothesis> support_hypotheses =

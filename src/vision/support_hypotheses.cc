@@ -289,11 +289,14 @@ JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines) {
   return out;
 }
 
-std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& input_lines, const RecognizerOptions& options) {
-  const JoinedLines joined = JoinCollinearLines(input_lines);
-  std::vector<char> representative(input_lines.size());
-  for (size_t i = 0; i < input_lines.size(); ++i)
-    representative[i] = joined.representative[i] == static_cast<int>(i);
+std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& lines, const RecognizerOptions& options) {
+  return FindCorners(JoinCollinearLines(lines), options);
+}
+
+std::vector<ImageCorner> FindCorners(const JoinedLines& joined, const RecognizerOptions& options) {
+  const size_t count = joined.representative.size();
+  std::vector<char> representative(count);
+  for (size_t i = 0; i < count; ++i) representative[i] = joined.representative[i] == static_cast<int>(i);
   std::vector<ImageCorner> corners;
   for (const LineJunction& j : FindJunctions(joined.extent, options.junction_gap_px, representative)) {
     ImageCorner c;
@@ -468,9 +471,9 @@ void ForEachPlacement(const ModelLibrary& models, const Camera& camera, const Li
     if (skip_thin_arms) {
       bool ridge = false;
       for (int k = 0; k < 2 && !ridge; ++k) {
-        ridge = LineRidgeShare(ImageLine{corner.point, corner.arm_end[static_cast<size_t>(k)]}, camera,
-                               detection.edge_map,
-                               options.support_corner_ridge_grey) >= options.support_corner_ridge_share;
+        ridge = LineRidgeShareAtLeast(ImageLine{corner.point, corner.arm_end[static_cast<size_t>(k)]}, camera,
+                                      detection.edge_map, options.support_corner_ridge_grey,
+                                      options.support_corner_ridge_share);
       }
       if (ridge) continue;
     }

@@ -215,6 +215,14 @@ TEST(ContoursTest, OnlyLongStepEdgesAreOccludingContours) {
     const Eigen::Vector2d d = (c.b - c.a).normalized();
     EXPECT_GT(Eigen::Vector2d(-d.y(), d.x()).dot(Eigen::Vector2d(319.5, 240) - c.a), 0) << x;
   }
+  // The same from the lines joined beforehand, as the recognizer asks (one join for the corners too).
+  const std::vector<ImageLine> from_joined =
+      OccludingContours(detection, JoinCollinearLines(detection.lines), camera, options);
+  ASSERT_EQ(from_joined.size(), contours.size());
+  for (size_t k = 0; k < contours.size(); ++k) {
+    EXPECT_EQ(from_joined[k].a, contours[k].a);
+    EXPECT_EQ(from_joined[k].b, contours[k].b);
+  }
   options.contour_min_step_grey = 0;  // the thin line too (an edge either side of it)
   const size_t with_line = OccludingContours(detection, camera, options).size();
   EXPECT_GE(with_line, 3u);

@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
+#include "dev_set.h"
 #include "synthetic_scene.h"
 #include "teachsim/vision/recognition_stages.h"
 #include "teachsim/vision/recognizer.h"
@@ -369,6 +370,49 @@ TEST(HypothesisFitTest, CornersWithAGrainLineAsAnArmProposeNothing) {
   EXPECT_FALSE(
       SupportHypotheses(library, camera, detection, grain_corners, {SupportPlane{}}, any_support).empty());
   EXPECT_GT(clutter, static_cast<int>(corners.size())) << "by default this image is not cluttered";
+}
+
+// LineRidgeShareAtLeast, which stops looking once the rest of the samples cannot change the
+// answer, answers as LineRidgeShare's share compared with the threshold: on the lines of two dev-set
+// images (wood grain, block edges, shadows), their halves, the lines turned round, and the lines
+// drawn on three times as long (mostly off the image: samples not counted), at thresholds from
+// below 0 to above 1, for two grey-level margins.
+TEST(HypothesisFitTest, TheRidgeShareThresholdIsDecidedAsTheWholeShareDecidesIt) {
+  const std::vector<dev::Case> cases = dev::Cases(dev::Truth());
+  ASSERT_GE(cases.size(), 2u);
+  int partly = 0, above_half = 0, below_half = 0, compared = 0;
+  for (size_t k : {size_t{0}, cases.size() - 1}) {
+    const cv::Mat image = cv::imread(cases[k].image_path, cv::IMREAD_GRAYSCALE);
+    ASSERT_FALSE(image.empty()) << cases[k].image_path;
+    const auto camera = Camera::FromSpec(cases[k].camera);
+    ASSERT_TRUE(camera.ok()) << camera.status().message();
+    const LineDetection detection = DetectLinesAndEdges(image, *camera, RecognizerOptions{});
+    ASSERT_GT(detection.lines.size(), 50u);
+    for (const ImageLine& l : detection.lines) {
+      const Eigen::Vector2d middle = 0.5 * (l.a + l.b);
+      for (const ImageLine& line : {l, ImageLine{l.b, l.a}, ImageLine{l.a, middle}, ImageLine{middle, l.b},
+                                    ImageLine{l.a, l.a + 3 * (l.b - l.a)}}) {
+        for (double min_grey : {8.0, 4.0}) {
+          const double share = LineRidgeShare(line, *camera, detection.edge_map, min_grey);
+          partly += share > 0 && share < 1;
+          above_half += share >= 0.5;
+          below_half += share < 0.5;
+          for (double threshold : {-0.1, 0.0, 0.1, 0.25, 1.0 / 3, 0.5, 2.0 / 3, 0.8, 1.0, 1.5, share}) {
+            ASSERT_EQ(LineRidgeShareAtLeast(line, *camera, detection.edge_map, min_grey, threshold),
+                      share >= threshold)
+                << "line (" << line.a.transpose() << ") - (" << line.b.transpose() << "), share " << share
+                << ", threshold " << threshold;
+            ++compared;
+          }
+        }
+      }
+    }
+  }
+  // The lines cover the cases that can go wrong: shares strictly between 0 and 1, and both answers.
+  EXPECT_GE(partly, 100);
+  EXPECT_GE(above_half, 20);
+  EXPECT_GE(below_half, 100);
+  EXPECT_GT(compared, 10000);
 }
 
 // MatchEdges passes over the lines outside the predicted edges' bounding box (grown by the match

@@ -354,6 +354,10 @@ struct ImageCorner {
 // point on both sides, both at least min_grey brighter (or darker) than it and within min_grey of
 // each other (no step between two surfaces). A block's face seen edge-on is such a thin strip too.
 double LineRidgeShare(const ImageLine& line, const Camera& camera, const EdgeMap& edge_map, double min_grey);
+// Whether LineRidgeShare(line, camera, edge_map, min_grey) >= share, the same answer, its samples
+// looked at only until the rest cannot change it (a corner's arm is mostly not a thin line).
+bool LineRidgeShareAtLeast(const ImageLine& line, const Camera& camera, const EdgeMap& edge_map,
+                           double min_grey, double share);
 std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& lines, const RecognizerOptions& options);
 // The pieces of one straight edge (split where a shadow, a grain line or another block's edge
 // crosses it) joined: lines collinear within 1.5 px and 3 deg whose ends are at most 40 px apart
@@ -364,6 +368,9 @@ struct JoinedLines {
   std::vector<ImageLine> extent;
 };
 JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines);
+// The same from the lines already joined (JoinCollinearLines(lines)): one join serves both
+// FindCorners and OccludingContours.
+std::vector<ImageCorner> FindCorners(const JoinedLines& joined, const RecognizerOptions& options);
 // Occluding contours (contours.cc, RecognizerOptions::occlusion_contours): the image's straight
 // edges of at least options.contour_min_length_px, collinear pieces joined (JoinCollinearLines),
 // with a median grey-level step across them of at least options.contour_min_step_grey (a wood
@@ -372,6 +379,9 @@ JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines);
 // median signed step).
 std::vector<ImageLine> OccludingContours(const LineDetection& detection, const Camera& camera,
                                          const RecognizerOptions& options);
+// The same with detection.lines already joined (JoinCollinearLines(detection.lines)).
+std::vector<ImageLine> OccludingContours(const LineDetection& detection, const JoinedLines& joined,
+                                         const Camera& camera, const RecognizerOptions& options);
 // A box's image: its vertices' pin-hole projections (undistorted px), their convex hull, and its
 // visible edges (VisibleBoxEdges).
 struct BoxImage {
