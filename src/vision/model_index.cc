@@ -9,7 +9,9 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <map>
+#include <vector>
 
 #include "teachsim/base/binary_io.h"
 #include "teachsim/base/json.h"
@@ -175,13 +177,17 @@ std::shared_ptr<RecognizerIndex> BuildIndex(const ModelLibrary& library, const R
 }
 
 void BuildTrees(RecognizerIndex* index) {
-  for (int k = 0; k < kGroupKinds; ++k) {
-    if (index->vectors[k].rows == 0) continue;
-    // A kd-tree searched approximately (each neighbour within 1 + eps of the true one's distance),
-    // as Beis & Lowe's best-bin-first search is; FLANN, its descendant, took 25 us per query here
-    // against nanoflann's 3-5 (docs/benchmarks.md, session 13).
-    index->trees[k] = std::make_shared<const KindTree>(index->vectors[k]);
-  }
+  // A kd-tree per kind, searched approximately (each neighbour within 1 + eps of the true one's
+  // distance), as Beis & Lowe's best-bin-first search is; FLANN, its descendant, took 25 us per
+  // query here against nanoflann's 3-5 (docs/benchmarks.md, session 13). The kinds' trees are
+  // independent: built side by side, the first on this thread (each the same tree as built alone).
+  auto build = [index](int k) {
+    if (index->vectors[k].rows > 0) index->trees[k] = std::make_shared<const KindTree>(index->vectors[k]);
+  };
+  std::vector<std::future<void>> others;
+  for (int k = 1; k < kGroupKinds; ++k) others.push_back(std::async(std::launch::async, build, k));
+  build(0);
+  for (std::future<void>& f : others) f.get();  // rethrows what a builder threw
 }
 
 uint64_t IndexKey(const ModelLibrary& library, const RecognizerOptions& options) {
