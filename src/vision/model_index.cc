@@ -223,7 +223,29 @@ Status SaveIndex(const RecognizerIndex& index, uint64_t key, const std::string& 
   return json::WriteFileAtomic(path, out);
 }
 
-std::shared_ptr<RecognizerIndex> LoadIndex(const std::string& path, uint64_t key) {
+// Whether a cached index holds together: unit rotations and finite positions for the views, entries
+// naming a model of the library (`models` of them), a view of the index and box vertices, finite
+// index vectors. A file with the right key can still be damaged; one that fails is rebuilt.
+bool HoldsTogether(const RecognizerIndex& index, size_t models) {
+  for (const geometry::Pose3& v : index.views) {
+    if (!v.rotation.coeffs().allFinite() || !(std::abs(v.rotation.norm() - 1) < 1e-9) ||
+        !v.translation.allFinite()) {
+      return false;
+    }
+  }
+  for (int k = 0; k < kGroupKinds; ++k) {
+    for (const IndexEntry& e : index.entries[k]) {
+      if (e.model >= models || e.view >= index.views.size()) return false;
+      for (uint8_t vertex : e.vertices) {
+        if (vertex >= 8) return false;
+      }
+    }
+    if (!index.vectors[k].empty() && !cv::checkRange(index.vectors[k], true)) return false;
+  }
+  return true;
+}
+
+std::shared_ptr<RecognizerIndex> LoadIndex(const std::string& path, uint64_t key, size_t models) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return nullptr;
   char magic[8];
@@ -253,7 +275,7 @@ std::shared_ptr<RecognizerIndex> LoadIndex(const std::string& path, uint64_t key
       return nullptr;
     }
   }
-  return index;
+  return HoldsTogether(*index, models) ? index : nullptr;
 }
 
 }  // namespace
@@ -272,7 +294,7 @@ Result<std::shared_ptr<RecognizerIndex>> LoadOrBuildIndex(const ModelLibrary& li
     char name[64];
     std::snprintf(name, sizeof(name), "recognizer-index-%016llx.bin", static_cast<unsigned long long>(key));
     path = (std::filesystem::path(cache_dir) / name).string();
-    index = LoadIndex(path, key);
+    index = LoadIndex(path, key, library.models.size());
     *loaded_from_cache = index != nullptr;
   }
   if (!index) {
