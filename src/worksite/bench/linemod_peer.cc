@@ -132,35 +132,49 @@ Result<LinemodPeer> LinemodPeer::Create(const std::map<std::string, Eigen::Vecto
     cache_path = (std::filesystem::path(cache_dir) / name).string();
   }
 
-  // --- From the cache.
+  // --- From the cache. A file is used only as far as it holds together: the key, the library's
+  // model names, unit rotations and finite numbers, the detector's pyramid levels, template sizes
+  // and feature counts in bounds, each feature inside its template with one of the 8 orientation
+  // labels. Anything else (a damaged file) and the templates are made afresh.
   if (!cache_path.empty() && std::filesystem::exists(cache_path)) {
+    constexpr std::int32_t kMaxTemplateSide = 4096, kMaxFeatures = 1 << 16;
+    constexpr std::uint32_t kMaxTemplates = 1u << 20;
     std::ifstream in(cache_path, std::ios::binary);
     std::string magic(sizeof(kCacheMagic), '\0'), stored_key;
     std::uint32_t key_size = 0, classes = 0;
     bool ok = in.read(magic.data(), static_cast<std::streamsize>(magic.size())) &&
-              std::memcmp(magic.data(), kCacheMagic, sizeof(kCacheMagic)) == 0 && Get(in, &key_size);
+              std::memcmp(magic.data(), kCacheMagic, sizeof(kCacheMagic)) == 0 && Get(in, &key_size) &&
+              key_size == key.size();
     if (ok) {
       stored_key.resize(key_size);
-      ok = in.read(stored_key.data(), key_size) && stored_key == key && Get(in, &classes);
+      ok = in.read(stored_key.data(), key_size) && stored_key == key && Get(in, &classes) &&
+           classes <= model_sizes_m.size();
     }
     for (std::uint32_t c = 0; ok && c < classes; ++c) {
       std::uint32_t name_size = 0, count = 0;
-      ok = Get(in, &name_size);
-      std::string class_id(name_size, '\0');
-      ok = ok && in.read(class_id.data(), name_size) && Get(in, &count);
+      ok = Get(in, &name_size) && name_size <= 256;
+      std::string class_id(ok ? name_size : 0, '\0');
+      ok = ok && in.read(class_id.data(), name_size) && model_sizes_m.count(class_id) > 0 &&
+           peer.info_.count(class_id) == 0 && Get(in, &count) && count <= kMaxTemplates;
       for (std::uint32_t t = 0; ok && t < count; ++t) {
         TemplateInfo info;
         double v[10];
-        ok = in.read(reinterpret_cast<char*>(v), sizeof(v)).good();
-        info.camera_T_object = geometry::Pose3(Eigen::Quaterniond(v[0], v[1], v[2], v[3]), {v[4], v[5], v[6]});
+        ok = in.read(reinterpret_cast<char*>(v), sizeof(v)).good() &&
+             Eigen::Map<Eigen::Matrix<double, 10, 1>>(v).allFinite();
+        const Eigen::Quaterniond rotation(v[0], v[1], v[2], v[3]);
+        ok = ok && std::abs(rotation.norm() - 1) < 1e-9 && v[9] > 0;
+        info.camera_T_object = geometry::Pose3(rotation, {v[4], v[5], v[6]});
         info.centre_offset_px = {v[7], v[8]};
         info.size_px = v[9];
         std::uint32_t levels = 0;
-        ok = ok && Get(in, &levels);
-        std::vector<cv::linemod::Template> pyramid(levels);
-        for (cv::linemod::Template& level : pyramid) {
+        ok = ok && Get(in, &levels) && levels == options.pyramid_t.size();
+        std::vector<cv::linemod::Template> pyramid(ok ? levels : 0);
+        for (std::size_t l = 0; l < pyramid.size() && ok; ++l) {
+          cv::linemod::Template& level = pyramid[l];
           std::int32_t header[4];
-          ok = ok && in.read(reinterpret_cast<char*>(header), sizeof(header));
+          ok = in.read(reinterpret_cast<char*>(header), sizeof(header)).good() && header[0] >= 0 &&
+               header[0] <= kMaxTemplateSide && header[1] >= 0 && header[1] <= kMaxTemplateSide &&
+               header[2] == static_cast<std::int32_t>(l) && header[3] >= 0 && header[3] <= kMaxFeatures;
           if (!ok) break;
           level.width = header[0];
           level.height = header[1];
@@ -168,7 +182,8 @@ Result<LinemodPeer> LinemodPeer::Create(const std::map<std::string, Eigen::Vecto
           level.features.resize(static_cast<std::size_t>(header[3]));
           for (cv::linemod::Feature& f : level.features) {
             std::int32_t xyl[3];
-            ok = ok && in.read(reinterpret_cast<char*>(xyl), sizeof(xyl));
+            ok = ok && in.read(reinterpret_cast<char*>(xyl), sizeof(xyl)) && xyl[0] >= 0 &&
+                 xyl[0] <= level.width && xyl[1] >= 0 && xyl[1] <= level.height && xyl[2] >= 0 && xyl[2] < 8;
             f = cv::linemod::Feature(xyl[0], xyl[1], xyl[2]);
           }
         }

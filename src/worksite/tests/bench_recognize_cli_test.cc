@@ -1,13 +1,18 @@
 // `teachsim bench recognize` from the command line: several render seeds pooled into one data set
 // (the figures are the sums of the seeds' own), teachsim alone without the peer, the peer compared
-// with teachsim on the blocks both found, each method's untimed warm-up, and bad arguments answered with exit
+// with teachsim on the blocks both found, each method's untimed warm-up, a damaged template cache built
+// again, and bad arguments answered with exit
 // status 2 and a message naming them. Skipped where the benchmarks are not built (the sanitizer build) or the
 // dev set is missing.
 #include <gtest/gtest.h>
 #include <stdlib.h>
 
 #include <algorithm>
+#include <cstdint>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 
 #include "teachsim/base/json.h"
@@ -190,6 +195,55 @@ TEST_F(BenchRecognizeCliTest, EachPeerIsComparedWithTeachsimOnTheBlocksBothFound
   EXPECT_NE(table.out.find("warm-up, untimed: teachsim and LINE-MOD twice on case_000.png first"),
             std::string::npos)
       << table.out;
+}
+
+// LINE-MOD's templates come from the cache only when the file holds together: a damaged count of a
+// template's features (2^31 - 1, which was once read and allocated as it stood) or a feature's
+// orientation label past LINE-MOD's 8 makes the benchmark build the templates again, and the rebuilt
+// file then loads.
+TEST_F(BenchRecognizeCliTest, ADamagedTemplateCacheIsBuiltAgain) {
+  auto setup = [](const std::string& args) {
+    const CommandRun run = Teachsim("bench recognize --quick --json --render-seeds 4 " + args);
+    EXPECT_EQ(run.status, 0) << run.err;
+    auto document = json::ParseText(run.out, "bench output");
+    EXPECT_TRUE(document.ok()) << document.status().message();
+    return document.ok() ? (*document)["setup"] : json::Json::object();
+  };
+  setup("");  // the cache made (or already there)
+  std::string path;
+  for (const auto& file : std::filesystem::directory_iterator(cache_)) {
+    if (file.path().filename().string().rfind("linemod_", 0) == 0) path = file.path().string();
+  }
+  ASSERT_FALSE(path.empty()) << "no LINE-MOD template cache in " << cache_;
+  auto read = [&] {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  };
+  auto u32 = [](const std::string& bytes, std::size_t at) {
+    std::uint32_t v = 0;
+    std::memcpy(&v, bytes.data() + at, sizeof(v));
+    return v;
+  };
+  // The layout (LinemodPeer::Create): magic (29 bytes), key size, key, class count, then the first
+  // class: name size, name, template count; its first template: 10 doubles, the level count, the
+  // first level's header (width, height, level, feature count) and its features (x, y, label).
+  for (const int damage : {0, 1}) {
+    std::string bytes = read();
+    std::size_t at = 29;
+    at += 4 + u32(bytes, at);  // the key
+    at += 4;                   // the class count
+    at += 4 + u32(bytes, at);  // the first class's name
+    at += 4 + 80 + 4;          // its template count, the first template's numbers and level count
+    ASSERT_GT(u32(bytes, at + 12), 0u) << "the first level has no features";
+    const std::uint32_t value = damage == 0 ? 0x7fffffffu : 9u;
+    std::memcpy(bytes.data() + (damage == 0 ? at + 12 : at + 16 + 8), &value, sizeof(value));
+    {
+      std::ofstream out(path, std::ios::binary | std::ios::trunc);
+      out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    }
+    EXPECT_FALSE(setup("")["linemod_templates_from_cache"].get<bool>()) << "damage " << damage;
+  }
+  EXPECT_TRUE(setup("")["linemod_templates_from_cache"].get<bool>());
 }
 
 TEST_F(BenchRecognizeCliTest, BadArgumentsAreNamed) {
