@@ -33,7 +33,8 @@ std::vector<ImageLine> OccludingContours(const LineDetection& detection, const J
                                          const Camera& camera, const RecognizerOptions& options) {
   constexpr int kProbes = 9;
   constexpr double kOffsetPx = 4.5;
-  TEACHSIM_CHECK(joined.representative.size() == detection.lines.size());
+  TEACHSIM_CHECK(joined.representative.size() == detection.lines.size() &&
+                 joined.extent.size() == detection.lines.size());
   const Eigen::Matrix3d K_inv = camera.K().inverse();
   std::vector<ImageLine> out;
   for (size_t l = 0; l < detection.lines.size(); ++l) {

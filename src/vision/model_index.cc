@@ -5,12 +5,14 @@
 #include <algorithm>
 #include <cmath>
 #include <complex>
+#include <cstddef>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <future>
 #include <map>
+#include <system_error>
 #include <vector>
 
 #include "teachsim/base/binary_io.h"
@@ -185,7 +187,13 @@ void BuildTrees(RecognizerIndex* index) {
     if (index->vectors[k].rows > 0) index->trees[k] = std::make_shared<const KindTree>(index->vectors[k]);
   };
   std::vector<std::future<void>> others;
-  for (int k = 1; k < kGroupKinds; ++k) others.push_back(std::async(std::launch::async, build, k));
+  for (int k = 1; k < kGroupKinds; ++k) {
+    try {
+      others.push_back(std::async(std::launch::async, build, k));
+    } catch (const std::system_error&) {  // no thread to be had: built here instead
+      build(k);
+    }
+  }
   build(0);
   for (std::future<void>& f : others) f.get();  // rethrows what a builder threw
 }
@@ -215,8 +223,14 @@ Status SaveIndex(const RecognizerIndex& index, uint64_t key, const std::string& 
   }
   for (int k = 0; k < kGroupKinds; ++k) {
     Put(&out, static_cast<uint64_t>(index.entries[k].size()));
-    out.append(reinterpret_cast<const char*>(index.entries[k].data()),
-               index.entries[k].size() * sizeof(IndexEntry));
+    // Entry by entry, the padding byte zeroed: the same index writes the same bytes.
+    for (const IndexEntry& e : index.entries[k]) {
+      char bytes[sizeof(IndexEntry)] = {};
+      std::memcpy(bytes + offsetof(IndexEntry, model), &e.model, sizeof(e.model));
+      std::memcpy(bytes + offsetof(IndexEntry, view), &e.view, sizeof(e.view));
+      std::memcpy(bytes + offsetof(IndexEntry, vertices), e.vertices, sizeof(e.vertices));
+      out.append(bytes, sizeof(bytes));
+    }
     out.append(reinterpret_cast<const char*>(index.vectors[k].data),
                index.vectors[k].total() * index.vectors[k].elemSize());
   }
@@ -233,11 +247,25 @@ bool HoldsTogether(const RecognizerIndex& index, size_t models) {
       return false;
     }
   }
+  // Whether box vertices a and b are the ends of one of its 12 edges.
+  auto edge = [](int a, int b) {
+    for (const auto& e : kBoxEdges) {
+      if ((e[0] == a && e[1] == b) || (e[0] == b && e[1] == a)) return true;
+    }
+    return false;
+  };
   for (int k = 0; k < kGroupKinds; ++k) {
+    const auto kind = static_cast<GroupKind>(k);
     for (const IndexEntry& e : index.entries[k]) {
       if (e.model >= models || e.view >= index.views.size()) return false;
       for (uint8_t vertex : e.vertices) {
         if (vertex >= 8) return false;
+      }
+      // Each of the group's segments a box edge, as the fit takes them (FitIndexHypotheses): a fork's
+      // from its first vertex, a chain's from one vertex to the next.
+      for (int s = 0; s < GroupSegments(kind); ++s) {
+        const int a = kind == GroupKind::kFork3 ? e.vertices[0] : e.vertices[s];
+        if (!edge(a, e.vertices[s + 1])) return false;
       }
     }
     if (!index.vectors[k].empty() && !cv::checkRange(index.vectors[k], true)) return false;
@@ -248,10 +276,19 @@ bool HoldsTogether(const RecognizerIndex& index, size_t models) {
 std::shared_ptr<RecognizerIndex> LoadIndex(const std::string& path, uint64_t key, size_t models) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return nullptr;
+  // The bytes left after the read position: no count is allocated that the file cannot fill.
+  in.seekg(0, std::ios::end);
+  const std::streamoff size = in.tellg();
+  in.seekg(0, std::ios::beg);
+  if (size < 0) return nullptr;
+  auto left = [&] {
+    const std::streamoff at = in.tellg();
+    return at < 0 || at > size ? uint64_t{0} : static_cast<uint64_t>(size - at);
+  };
   char magic[8];
   uint64_t stored_key = 0, views = 0;
   if (!in.read(magic, 8) || std::memcmp(magic, kMagic, 8) != 0 || !Get(in, &stored_key) ||
-      stored_key != key || !Get(in, &views) || views > 1000000) {
+      stored_key != key || !Get(in, &views) || views > 1000000 || views * 7 * sizeof(double) > left()) {
     return nullptr;
   }
   auto index = std::make_shared<RecognizerIndex>();
@@ -262,13 +299,14 @@ std::shared_ptr<RecognizerIndex> LoadIndex(const std::string& path, uint64_t key
   }
   for (int k = 0; k < kGroupKinds; ++k) {
     uint64_t n = 0;
-    if (!Get(in, &n) || n > 100000000) return nullptr;
+    const int dim = GroupDimension(static_cast<GroupKind>(k));
+    if (!Get(in, &n) || n > 100000000 || n * (sizeof(IndexEntry) + dim * sizeof(float)) > left())
+      return nullptr;
     index->entries[k].resize(n);
     if (!in.read(reinterpret_cast<char*>(index->entries[k].data()),
                  static_cast<std::streamsize>(n * sizeof(IndexEntry)))) {
       return nullptr;
     }
-    const int dim = GroupDimension(static_cast<GroupKind>(k));
     index->vectors[k] = cv::Mat(static_cast<int>(n), dim, CV_32F);
     if (!in.read(reinterpret_cast<char*>(index->vectors[k].data),
                  static_cast<std::streamsize>(n * dim * sizeof(float)))) {

@@ -64,8 +64,9 @@ struct RecognizerIndex {
 namespace internal {
 
 // The index for `library` and the options' view sampling: read from `cache_dir` when a file there was
-// built for the same models and sampling and holds together (entries naming the library's models,
-// the index's views and box vertices; finite numbers), else built (and written there atomically,
+// built for the same models and sampling and holds together (counts the file can fill, entries
+// naming the library's models, the index's views and box vertices joined by box edges; unit view
+// rotations, finite numbers), else built (and written there atomically,
 // unless `cache_dir` is empty); its kd-trees built. *loaded_from_cache says which.
 Result<std::shared_ptr<RecognizerIndex>> LoadOrBuildIndex(const ModelLibrary& library,
                                                           const RecognizerOptions& options,

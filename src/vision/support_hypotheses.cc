@@ -14,6 +14,7 @@
 #include <optional>
 #include <vector>
 
+#include "teachsim/base/status.h"
 #include "teachsim/vision/recognition_stages.h"
 
 namespace teachsim::vision {
@@ -294,6 +295,7 @@ std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& lines, const 
 }
 
 std::vector<ImageCorner> FindCorners(const JoinedLines& joined, const RecognizerOptions& options) {
+  TEACHSIM_CHECK(joined.extent.size() == joined.representative.size());
   const size_t count = joined.representative.size();
   std::vector<char> representative(count);
   for (size_t i = 0; i < count; ++i) representative[i] = joined.representative[i] == static_cast<int>(i);

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 #include <random>
 
@@ -375,12 +376,12 @@ TEST(HypothesisFitTest, CornersWithAGrainLineAsAnArmProposeNothing) {
 // LineRidgeShareAtLeast, which stops looking once the rest of the samples cannot change the
 // answer, answers as LineRidgeShare's share compared with the threshold: on the lines of two dev-set
 // images (wood grain, block edges, shadows), their halves, the lines turned round, and the lines
-// drawn on three times as long (mostly off the image: samples not counted), at thresholds from
-// below 0 to above 1, for two grey-level margins.
+// drawn on three times as long (dozens of them leaving the image: samples not counted), at thresholds
+// from below 0 to above 1 and NaN, for two grey-level margins.
 TEST(HypothesisFitTest, TheRidgeShareThresholdIsDecidedAsTheWholeShareDecidesIt) {
   const std::vector<dev::Case> cases = dev::Cases(dev::Truth());
   ASSERT_GE(cases.size(), 2u);
-  int partly = 0, above_half = 0, below_half = 0, compared = 0;
+  int partly = 0, above_half = 0, below_half = 0, compared = 0, leaving = 0;
   for (size_t k : {size_t{0}, cases.size() - 1}) {
     const cv::Mat image = cv::imread(cases[k].image_path, cv::IMREAD_GRAYSCALE);
     ASSERT_FALSE(image.empty()) << cases[k].image_path;
@@ -390,6 +391,7 @@ TEST(HypothesisFitTest, TheRidgeShareThresholdIsDecidedAsTheWholeShareDecidesIt)
     ASSERT_GT(detection.lines.size(), 50u);
     for (const ImageLine& l : detection.lines) {
       const Eigen::Vector2d middle = 0.5 * (l.a + l.b);
+      leaving += !camera->InImage(camera->DistortPixel(l.a + 3 * (l.b - l.a)));
       for (const ImageLine& line : {l, ImageLine{l.b, l.a}, ImageLine{l.a, middle}, ImageLine{middle, l.b},
                                     ImageLine{l.a, l.a + 3 * (l.b - l.a)}}) {
         for (double min_grey : {8.0, 4.0}) {
@@ -397,7 +399,8 @@ TEST(HypothesisFitTest, TheRidgeShareThresholdIsDecidedAsTheWholeShareDecidesIt)
           partly += share > 0 && share < 1;
           above_half += share >= 0.5;
           below_half += share < 0.5;
-          for (double threshold : {-0.1, 0.0, 0.1, 0.25, 1.0 / 3, 0.5, 2.0 / 3, 0.8, 1.0, 1.5, share}) {
+          for (double threshold : {-0.1, 0.0, 0.1, 0.25, 1.0 / 3, 0.5, 2.0 / 3, 0.8, 1.0, 1.5, share,
+                                   std::numeric_limits<double>::quiet_NaN()}) {
             ASSERT_EQ(LineRidgeShareAtLeast(line, *camera, detection.edge_map, min_grey, threshold),
                       share >= threshold)
                 << "line (" << line.a.transpose() << ") - (" << line.b.transpose() << "), share " << share
@@ -408,7 +411,9 @@ TEST(HypothesisFitTest, TheRidgeShareThresholdIsDecidedAsTheWholeShareDecidesIt)
       }
     }
   }
-  // The lines cover the cases that can go wrong: shares strictly between 0 and 1, and both answers.
+  // The lines cover the cases that can go wrong: shares strictly between 0 and 1, both answers, and
+  // lines drawn on past the image's edge (samples left out of the count).
+  EXPECT_GE(leaving, 20);
   EXPECT_GE(partly, 100);
   EXPECT_GE(above_half, 20);
   EXPECT_GE(below_half, 100);

@@ -64,8 +64,9 @@ TEST(ModelIndexTest, EachKindsTreeSearchesAsOneBuiltAlone) {
 }
 
 // A cache file with the right key whose contents were damaged (an entry naming a model the library
-// does not have, a view past the index's, a vertex past a box's eight, a NaN in an index vector) is
-// not loaded: the index is built again, and the rebuilt file then loads.
+// does not have, a view past the index's, a vertex past a box's eight, two vertices that no box edge
+// joins, a NaN in an index vector) is not loaded: the index is built again, and the rebuilt file then
+// loads.
 TEST(ModelIndexTest, ADamagedCacheFileIsRebuiltNotTrusted) {
   const ModelLibrary library{
       {{"cube45", Eigen::Vector3d(0.045, 0.045, 0.045)}, {"bar90", Eigen::Vector3d(0.09, 0.045, 0.045)}}};
@@ -99,10 +100,13 @@ TEST(ModelIndexTest, ADamagedCacheFileIsRebuiltNotTrusted) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const uint16_t two = 2, far_view = static_cast<uint16_t>(views);
   const uint8_t ninth = 8;
+  // The first entry's second vertex made its first: its first segment is then no edge of the box.
+  const char first_vertex = original[entries + offsetof(IndexEntry, vertices)];
   const std::vector<std::pair<size_t, std::string>> damages = {
       {model, std::string(reinterpret_cast<const char*>(&two), sizeof(two))},
       {view, std::string(reinterpret_cast<const char*>(&far_view), sizeof(far_view))},
       {vertex, std::string(reinterpret_cast<const char*>(&ninth), sizeof(ninth))},
+      {entries + offsetof(IndexEntry, vertices) + 1, std::string(1, first_vertex)},
       {vectors + sizeof(float), std::string(reinterpret_cast<const char*>(&nan), sizeof(nan))}};
   for (const auto& [at, bytes] : damages) {
     std::string damaged = original;

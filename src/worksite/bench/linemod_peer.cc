@@ -74,7 +74,10 @@ Status LinemodOptions::Validate() const {
   if (!(in_plane_step_deg >= 1 && in_plane_step_deg <= 360)) {
     return Status::InvalidInput("LinemodOptions::in_plane_step_deg must be in [1, 360]");
   }
-  if (num_features < 8) return Status::InvalidInput("LinemodOptions::num_features must be >= 8");
+  if (num_features < 8 || num_features > 63) {
+    return Status::InvalidInput(
+        "LinemodOptions::num_features must be in [8, 63] (LINE-MOD matches 63 at most)");
+  }
   if (pyramid_t.empty()) return Status::InvalidInput("LinemodOptions::pyramid_t must not be empty");
   if (!(match_threshold > 0 && match_threshold <= 100)) {
     return Status::InvalidInput("LinemodOptions::match_threshold must be in (0, 100]");
@@ -137,7 +140,8 @@ Result<LinemodPeer> LinemodPeer::Create(const std::map<std::string, Eigen::Vecto
   // and feature counts in bounds, each feature inside its template with one of the 8 orientation
   // labels. Anything else (a damaged file) and the templates are made afresh.
   if (!cache_path.empty() && std::filesystem::exists(cache_path)) {
-    constexpr std::int32_t kMaxTemplateSide = 4096, kMaxFeatures = 1 << 16;
+    // LINE-MOD matches a template of at most 63 features (cv::linemod's similarity asserts it).
+    constexpr std::int32_t kMaxTemplateSide = 4096, kMaxFeatures = 63;
     constexpr std::uint32_t kMaxTemplates = 1u << 20;
     std::ifstream in(cache_path, std::ios::binary);
     std::string magic(sizeof(kCacheMagic), '\0'), stored_key;
@@ -148,7 +152,7 @@ Result<LinemodPeer> LinemodPeer::Create(const std::map<std::string, Eigen::Vecto
     if (ok) {
       stored_key.resize(key_size);
       ok = in.read(stored_key.data(), key_size) && stored_key == key && Get(in, &classes) &&
-           classes <= model_sizes_m.size();
+           classes == model_sizes_m.size();  // every model has its templates (the writer writes all)
     }
     for (std::uint32_t c = 0; ok && c < classes; ++c) {
       std::uint32_t name_size = 0, count = 0;

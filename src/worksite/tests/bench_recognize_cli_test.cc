@@ -210,9 +210,13 @@ TEST_F(BenchRecognizeCliTest, ADamagedTemplateCacheIsBuiltAgain) {
     return document.ok() ? (*document)["setup"] : json::Json::object();
   };
   setup("");  // the cache made (or already there)
+  // The newest template file: the one just used (an older one of another key may lie beside it).
   std::string path;
+  std::filesystem::file_time_type newest;
   for (const auto& file : std::filesystem::directory_iterator(cache_)) {
-    if (file.path().filename().string().rfind("linemod_", 0) == 0) path = file.path().string();
+    if (file.path().filename().string().rfind("linemod_", 0) != 0) continue;
+    if (path.empty() || file.last_write_time() > newest)
+      path = file.path().string(), newest = file.last_write_time();
   }
   ASSERT_FALSE(path.empty()) << "no LINE-MOD template cache in " << cache_;
   auto read = [&] {
