@@ -247,13 +247,6 @@ bool HoldsTogether(const RecognizerIndex& index, size_t models) {
       return false;
     }
   }
-  // Whether box vertices a and b are the ends of one of its 12 edges.
-  auto edge = [](int a, int b) {
-    for (const auto& e : kBoxEdges) {
-      if ((e[0] == a && e[1] == b) || (e[0] == b && e[1] == a)) return true;
-    }
-    return false;
-  };
   for (int k = 0; k < kGroupKinds; ++k) {
     const auto kind = static_cast<GroupKind>(k);
     for (const IndexEntry& e : index.entries[k]) {
@@ -261,11 +254,9 @@ bool HoldsTogether(const RecognizerIndex& index, size_t models) {
       for (uint8_t vertex : e.vertices) {
         if (vertex >= 8) return false;
       }
-      // Each of the group's segments a box edge, as the fit takes them (FitIndexHypotheses): a fork's
-      // from its first vertex, a chain's from one vertex to the next.
+      // Each of the group's segments on a box edge, as the fit takes them (FitIndexHypotheses).
       for (int s = 0; s < GroupSegments(kind); ++s) {
-        const int a = kind == GroupKind::kFork3 ? e.vertices[0] : e.vertices[s];
-        if (!edge(a, e.vertices[s + 1])) return false;
+        if (EntrySegmentEdge(e, kind, s) < 0) return false;
       }
     }
     if (!index.vectors[k].empty() && !cv::checkRange(index.vectors[k], true)) return false;
@@ -317,6 +308,16 @@ std::shared_ptr<RecognizerIndex> LoadIndex(const std::string& path, uint64_t key
 }
 
 }  // namespace
+
+int EntrySegmentEdge(const IndexEntry& entry, GroupKind kind, int s) {
+  const int a = kind == GroupKind::kFork3 ? entry.vertices[0] : entry.vertices[s];
+  const int b = entry.vertices[s + 1];
+  for (int e = 0; e < 12; ++e) {
+    const auto& ends = kBoxEdges[static_cast<size_t>(e)];
+    if ((ends[0] == a && ends[1] == b) || (ends[0] == b && ends[1] == a)) return e;
+  }
+  return -1;
+}
 
 namespace internal {
 

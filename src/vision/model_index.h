@@ -24,6 +24,11 @@ struct IndexEntry {
   uint8_t vertices[5] = {0, 0, 0, 0, 0};  // the group's points as box vertex ids (see Group)
 };
 
+// The box edge (index into kBoxEdges) that segment s of an entry of `kind` lies on: a fork's runs
+// from its first vertex, a chain's from one vertex to the next. -1 where those two vertices are not
+// the ends of one edge (only in a damaged cache file).
+int EntrySegmentEdge(const IndexEntry& entry, GroupKind kind, int s);
+
 // One group kind's index vectors (the rows of a CV_32F matrix) as nanoflann reads them.
 struct IndexRows {
   cv::Mat rows;

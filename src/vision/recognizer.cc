@@ -1408,17 +1408,8 @@ void RecognitionPass::FitIndexHypotheses(const RecognizerIndex& index, const std
     // The hypothesis' own correspondences first, then predicted edges' matches (Lowe 1991).
     std::vector<LineMatch> matches;
     for (int s = 0; s < nseg; ++s) {
-      int va, vb;
-      if (group.kind == GroupKind::kFork3) {
-        va = entry.vertices[0], vb = entry.vertices[s + 1];
-      } else {
-        va = entry.vertices[s], vb = entry.vertices[s + 1];
-      }
-      int edge = -1;
-      for (int e = 0; e < 12; ++e) {
-        if ((kBoxEdges[e][0] == va && kBoxEdges[e][1] == vb) || (kBoxEdges[e][0] == vb && kBoxEdges[e][1] == va)) edge = e;
-      }
-      TEACHSIM_CHECK(edge >= 0);
+      const int edge = EntrySegmentEdge(entry, group.kind, s);
+      TEACHSIM_CHECK(edge >= 0);  // a loaded index holds together (LoadOrBuildIndex)
       const ImageLine& l = lines_[static_cast<size_t>(group.segments[static_cast<size_t>(s)])];
       matches.push_back({edge, l.a, l.b});
     }
