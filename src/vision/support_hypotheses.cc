@@ -123,47 +123,71 @@ double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& cam
   }
   const uint16_t visible = VisibleBoxEdges(size_m, camera_T_object.Inverse().translation);
   thread_local std::vector<ContourOccluder> occlusions;
-  // Flanks that end inside the box's image only with support_pole_ends (off: the stage took 3.5 ms
-  // longer per image for 14 more blocks in 3900 images; docs/benchmarks.md, sessions 38 and 42).
+  // Flanks that end inside the box's image only with support_pole_ends (RecognizerOptions).
   ContourOcclusions(contours, BoxImage(px, visible), &occlusions,
                     {.ends_inside = options.contour_pole_ends && options.support_pole_ends,
                      // measured: no block changed (RecognizerOptions::contour_across_beside)
                      .across_beside = false,
-                     // not measured here (support_pole_ends is off by default): the pole's top only
-                     // in the occlusion pass (RecognizerOptions::contour_pole_tops)
+                     // not measured here: the pole's top only in the occlusion pass
+                     // (RecognizerOptions::contour_pole_tops)
                      .pole_tops = false});
   if (occlusions.empty()) return -1;
   thread_local std::vector<OutlineSample> samples;
   thread_local std::vector<uint8_t> supported;
+  thread_local std::vector<uint8_t> hides;
+  thread_local std::vector<double> pinhole_x, pinhole_y;
   // The best side's support in view (and its share in view) at a sample spacing; -1: none passes.
+  // A sample's support is looked for only when a side needs it, and a side is left as soon as its
+  // hidden samples show too much support, or its samples in view can no longer reach min_score or
+  // the best side so far (the bound below is the score with every sample left supported: division
+  // and multiplication round monotonically, so it fails only where the whole count would).
   auto best_side = [&](double spacing_px, double min_score, double* shown_share) {
     if (!SampleOutline(size_m, camera, camera_T_object, spacing_px, &K, &samples) || samples.size() < 8)
       return -1.0;
+    // Each sample's support: 0 or 1, or kUnknown until looked for; none where the dilated edges
+    // show no edge pixel near (NoEdgeNear: EdgeAcross would find none).
+    constexpr uint8_t kUnknown = 2;
+    const int count = static_cast<int>(samples.size());
     supported.resize(samples.size());
     for (size_t i = 0; i < samples.size(); ++i)
-      supported[i] = EdgeAcross(edge_map, samples[i].at, samples[i].normal);
+      supported[i] = NoEdgeNear(edge_map, samples[i].at) ? 0 : kUnknown;
+    hides.resize(samples.size());
+    pinhole_x.resize(samples.size());
+    pinhole_y.resize(samples.size());
+    for (size_t i = 0; i < samples.size(); ++i)
+      pinhole_x[i] = samples[i].pinhole.x(), pinhole_y[i] = samples[i].pinhole.y();
+    auto support_at = [&](size_t i) {
+      if (supported[i] == kUnknown) supported[i] = EdgeAcross(edge_map, samples[i].at, samples[i].normal);
+      return static_cast<int>(supported[i]);
+    };
     double best = -1;
     for (const ContourOccluder& occluder : occlusions) {
-      int hidden = 0, hidden_supported = 0, shown_supported = 0;
-      for (size_t i = 0; i < samples.size(); ++i) {
-        if (occluder.Hides(samples[i].pinhole)) {
-          ++hidden;
-          hidden_supported += supported[i];
-        } else {
-          shown_supported += supported[i];
-        }
-      }
-      const int count = static_cast<int>(samples.size()), shown = count - hidden;
+      const int hidden = occluder.HidesEach(pinhole_x.data(), pinhole_y.data(), count, hides.data());
+      int shown_maybe = 0;  // shown samples that may be supported
+      for (size_t i = 0; i < samples.size(); ++i) shown_maybe += !hides[i] & (supported[i] != 0);
+      const int shown = count - hidden;
       if (hidden < options.occlusion_min_hidden_share * count ||
-          shown < options.LeastContourShownShare() * count ||
-          hidden_supported > options.contour_max_hidden_coverage * hidden) {
+          shown < options.LeastContourShownShare() * count)
         continue;
+      auto passes = [&](int shown_supported) {
+        const double score = static_cast<double>(shown_supported) / shown;
+        return score >= min_score && score * shown / count > best * *shown_share;
+      };
+      if (!passes(shown_maybe)) continue;
+      int hidden_supported = 0;
+      for (size_t i = 0;
+           i < samples.size() && hidden_supported <= options.contour_max_hidden_coverage * hidden; ++i)
+        if (hides[i] && supported[i] != 0) hidden_supported += support_at(i);
+      if (hidden_supported > options.contour_max_hidden_coverage * hidden) continue;
+      int shown_supported = 0, left = shown_maybe;
+      for (size_t i = 0; i < samples.size() && left > 0 && passes(shown_supported + left); ++i) {
+        if (hides[i] || supported[i] == 0) continue;
+        shown_supported += support_at(i);
+        --left;
       }
-      const double score = static_cast<double>(shown_supported) / shown;
-      if (score >= min_score && score * shown / count > best * *shown_share) {
-        best = score;
-        *shown_share = static_cast<double>(shown) / count;
-      }
+      if (left > 0 || !passes(shown_supported)) continue;
+      best = static_cast<double>(shown_supported) / shown;
+      *shown_share = static_cast<double>(shown) / count;
     }
     return best;
   };

@@ -195,6 +195,51 @@ TEST(ContoursTest, OneContourHidesEitherSideAndTwoTheStripBetweenThem) {
   EXPECT_EQ(ways.size(), 4u);
 }
 
+// HidesEach (the support-plane source's loop over an outline's samples) answers as Hides at every
+// point: one side, a strip and a pole strip with tops, at random points and at points on the band's
+// and the ends' limits.
+TEST(ContoursTest, HidingAtManyPointsAnswersAsHidingAtEach) {
+  const BoxImage box = Rectangle();
+  std::vector<ContourOccluder> ways;
+  ContourOcclusions({{{240, 100}, {240, 400}}, {{270, 100}, {275, 400}}}, box, &ways);
+  std::vector<ContourOccluder> more;
+  // A pole's flanks that end inside (as in TwoFlanksThatEndInsideHideTheStripUpToTheirEnds), its top.
+  ContourOcclusions({{{240, 400}, {240, 220}}, {{270, 220}, {270, 400}}}, box, &more, {.pole_tops = true});
+  ways.insert(ways.end(), more.begin(), more.end());
+  ways.push_back(ContourOccluder{});  // hides nothing
+  ASSERT_GE(ways.size(), 7u);
+  cv::RNG rng(53);
+  std::vector<double> x, y;
+  for (int i = 0; i < 2000; ++i)
+    x.push_back(rng.uniform(150.0, 350.0)), y.push_back(rng.uniform(50.0, 450.0));
+  // On the limits: the band's edge and either end's slack, along each side of each occluder.
+  for (const ContourOccluder& o : ways) {
+    for (int k = 0; k < o.count; ++k) {
+      const ContourOccluder::Side& side = o.sides[static_cast<size_t>(k)];
+      for (double t : {-kContourEndPx, 0.0, 0.5 * side.length, side.length + kContourEndPx}) {
+        for (double n : {-kContourBandPx, 0.0, 5.0}) {
+          const Eigen::Vector2d p = side.a + t * side.along + n * side.toward_hidden;
+          x.push_back(p.x()), y.push_back(p.y());
+        }
+      }
+    }
+  }
+  std::vector<uint8_t> hides(x.size(), 7);
+  int total_hidden = 0;
+  for (const ContourOccluder& o : ways) {
+    const int hidden = o.HidesEach(x.data(), y.data(), static_cast<int>(x.size()), hides.data());
+    int expected = 0;
+    for (size_t i = 0; i < x.size(); ++i) {
+      const bool h = o.Hides({x[i], y[i]});
+      expected += h;
+      ASSERT_EQ(hides[i], h ? 1 : 0) << "occluder " << (&o - ways.data()) << ", point " << i;
+    }
+    EXPECT_EQ(hidden, expected);
+    total_hidden += hidden;
+  }
+  EXPECT_GT(total_hidden, 1000);  // the points do fall in what they hide
+}
+
 TEST(ContoursTest, OnlyLongStepEdgesAreOccludingContours) {
   const Camera camera = synthetic::SyntheticCamera();
   cv::Mat image(camera.height(), camera.width(), CV_8U, cv::Scalar(150));

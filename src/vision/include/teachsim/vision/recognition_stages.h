@@ -418,6 +418,9 @@ struct ContourOccluder {
   bool Hides(const Eigen::Vector2d& px) const {
     return count > 0 && sides[0].Hides(px) && (count < 2 || sides[1].Hides(px));
   }
+  // Hides at n points (x[i], y[i]) into hides[i] (0 or 1), the same arithmetic without the early
+  // exits, so that the loop runs on vectors; the number hidden.
+  int HidesEach(const double* x, const double* y, int n, uint8_t* hides) const;
 };
 // Which pairs of contours ContourOcclusions takes besides two across a box's image.
 struct ContourPairing {
