@@ -211,10 +211,11 @@ struct RecognizerOptions {
   bool contour_across_beside = true;
   // The support-plane source takes them too (with contour_pole_ends): a placement short of
   // support_min_score is scored again on the outline beside such flanks. On against off, render seeds
-  // 7-71 (3900 images): found 0.4-0.7 visible 379 -> 392, < 0.4 29 -> 33, >= 0.7 +1, false detections
-  // 176 -> 175, but the support-plane stage took 3.5 ms longer per image (seeds 7-12: images over
-  // 50 ms 8-11 -> 33; docs/benchmarks.md, session 42).
-  bool support_pole_ends = false;
+  // 7-71 (3900 images): found 0.4-0.7 visible 458 -> 496 (46.7 -> 50.6 %), < 0.4 39 -> 46, >= 0.7
+  // 11608 -> 11611, false detections 177 -> 182 (session 53; session 42 measured 379 -> 392 on the
+  // recognizer of then and left it off for 3.5 ms more per image). Time: see docs/benchmarks.md,
+  // session 53.
+  bool support_pole_ends = true;
   double contour_min_length_px = 60;
   double contour_min_step_grey = 30;
   double contour_max_hidden_coverage = 0.3;
