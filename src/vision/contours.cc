@@ -206,22 +206,15 @@ bool SameBetween(const ImageLine& p, const ImageLine& q) {
 }  // namespace
 
 int ContourOccluder::HidesEach(const double* x, const double* y, int n, uint8_t* hides) const {
-  if (count == 0) {
+  if (count <= 0) {
     std::fill(hides, hides + n, uint8_t{0});
     return 0;
   }
-  const Side& s0 = sides[0];
-  const Side& s1 = sides[count == 2 ? 1 : 0];
-  const double ax0 = s0.a.x(), ay0 = s0.a.y(), ux0 = s0.along.x(), uy0 = s0.along.y();
-  const double nx0 = s0.toward_hidden.x(), ny0 = s0.toward_hidden.y(), end0 = s0.length + kContourEndPx;
-  const double ax1 = s1.a.x(), ay1 = s1.a.y(), ux1 = s1.along.x(), uy1 = s1.along.y();
-  const double nx1 = s1.toward_hidden.x(), ny1 = s1.toward_hidden.y(), end1 = s1.length + kContourEndPx;
+  const Side s0 = sides[0];
+  const Side s1 = sides[count >= 2 ? 1 : 0];
   int hidden = 0;
   for (int i = 0; i < n; ++i) {
-    const double dx0 = x[i] - ax0, dy0 = y[i] - ay0, dx1 = x[i] - ax1, dy1 = y[i] - ay1;
-    const double t0 = ux0 * dx0 + uy0 * dy0, t1 = ux1 * dx1 + uy1 * dy1;
-    const bool h = (t0 >= -kContourEndPx) & (t0 <= end0) & (nx0 * dx0 + ny0 * dy0 > -kContourBandPx) &
-                   (t1 >= -kContourEndPx) & (t1 <= end1) & (nx1 * dx1 + ny1 * dy1 > -kContourBandPx);
+    const bool h = s0.HidesAt(x[i], y[i]) & s1.HidesAt(x[i], y[i]);
     hides[i] = h;
     hidden += h;
   }

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <opencv2/imgproc.hpp>
 
 #include "synthetic_scene.h"
@@ -238,6 +239,24 @@ TEST(ContoursTest, HidingAtManyPointsAnswersAsHidingAtEach) {
     total_hidden += hidden;
   }
   EXPECT_GT(total_hidden, 1000);  // the points do fall in what they hide
+
+  // Exactly on the limits: a side along x from the origin, 10 px long, hiding y > -kContourBandPx
+  // from t = -kContourEndPx to 10 + kContourEndPx (both ends in, the band's edge out).
+  ContourOccluder side;
+  side.count = 1;
+  side.sides[0].length = 10;
+  const double in = std::nextafter(-kContourBandPx, 0.0),
+               beyond_end = std::nextafter(10 + kContourEndPx, 20.0);
+  const std::vector<double> lx = {
+      -kContourEndPx, 10 + kContourEndPx, 5, 5, std::nextafter(-kContourEndPx, -10.0), beyond_end};
+  const std::vector<double> ly = {0, 0, -kContourBandPx, in, 0, 0};
+  const std::vector<uint8_t> expected = {1, 1, 0, 1, 0, 0};
+  std::vector<uint8_t> at_limits(lx.size());
+  EXPECT_EQ(side.HidesEach(lx.data(), ly.data(), static_cast<int>(lx.size()), at_limits.data()), 3);
+  for (size_t i = 0; i < lx.size(); ++i) {
+    EXPECT_EQ(at_limits[i], expected[i]) << "limit point " << i;
+    EXPECT_EQ(side.Hides({lx[i], ly[i]}), expected[i] == 1) << "limit point " << i;
+  }
 }
 
 TEST(ContoursTest, OnlyLongStepEdgesAreOccludingContours) {

@@ -42,8 +42,8 @@
 // accepted recognitions partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits), no-contours
 // (no occluding contours: vision::RecognizerOptions::occlusion_contours), no-pole-ends (no strips
 // between flanks that end inside a pose's image: contour_pole_ends; no-pole-tops: such strips end
-// with their flanks, contour_pole_tops; no-support-pole-ends: not in the
-// support-plane source, support_pole_ends), no-across-beside (no strips between a contour across
+// with their flanks, contour_pole_tops; no-support-pole-ends: not in the support-plane source,
+// support_pole_ends), no-across-beside (no strips between a contour across
 // a pose's image and one beside it: contour_across_beside), contourlen-PX, contourstep-GREY,
 // contourcover-X and contourshown-X (their limits), barescore-X and barecover-X (the lower evidence score
 // behind a contour where the hidden outline shows no edge, and how bare it must be; barescore-1: off),
@@ -608,7 +608,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, no-refit, skip-any-claim, "
-           "matched-whole-edges, no-occlusion, no-contours, no-pole-ends, no-across-beside, "
+           "matched-whole-edges, no-occlusion, no-contours, no-pole-ends, no-pole-tops, no-across-beside, "
            "no-support-pole-ends, no-rescue, "
            "rescue-X, "
            "rules-only, index-N, "

@@ -407,10 +407,13 @@ struct ContourOccluder {
     Eigen::Vector2d a = Eigen::Vector2d::Zero(), along = Eigen::Vector2d::UnitX(),
                     toward_hidden = Eigen::Vector2d::UnitY();  // undistorted px; unit vectors
     double length = 0;
-    bool Hides(const Eigen::Vector2d& px) const {
-      const Eigen::Vector2d d = px - a;
-      const double t = along.dot(d);
-      return t >= -kContourEndPx && t <= length + kContourEndPx && toward_hidden.dot(d) > -kContourBandPx;
+    bool Hides(const Eigen::Vector2d& px) const { return HidesAt(px.x(), px.y()); }
+    // The same, written out: the one arithmetic of Hides and ContourOccluder::HidesEach.
+    bool HidesAt(double x, double y) const {
+      const double dx = x - a.x(), dy = y - a.y();
+      const double t = along.x() * dx + along.y() * dy;
+      return (t >= -kContourEndPx) & (t <= length + kContourEndPx) &
+             (toward_hidden.x() * dx + toward_hidden.y() * dy > -kContourBandPx);
     }
   };
   std::array<Side, 2> sides;
@@ -418,8 +421,9 @@ struct ContourOccluder {
   bool Hides(const Eigen::Vector2d& px) const {
     return count > 0 && sides[0].Hides(px) && (count < 2 || sides[1].Hides(px));
   }
-  // Hides at n points (x[i], y[i]) into hides[i] (0 or 1), the same arithmetic without the early
-  // exits, so that the loop runs on vectors; the number hidden.
+  // Hides at n points (x[i], y[i]) into hides[i] (0 or 1), through Side::HidesAt without early
+  // exits, in one loop over the points (the support-plane source's outline samples); the number
+  // hidden.
   int HidesEach(const double* x, const double* y, int n, uint8_t* hides) const;
 };
 // Which pairs of contours ContourOcclusions takes besides two across a box's image.
