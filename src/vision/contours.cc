@@ -214,8 +214,8 @@ int ContourOccluder::HidesEach(const double* x, const double* y, int n, uint8_t*
   const Side s1 = sides[count >= 2 ? 1 : 0];
   int hidden = 0;
   for (int i = 0; i < n; ++i) {
-    const bool h = s0.HidesAt(x[i], y[i]) & s1.HidesAt(x[i], y[i]);
-    hides[i] = h;
+    const int h = static_cast<int>(s0.HidesAt(x[i], y[i])) & static_cast<int>(s1.HidesAt(x[i], y[i]));
+    hides[i] = static_cast<uint8_t>(h);
     hidden += h;
   }
   return hidden;

@@ -166,7 +166,8 @@ double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& cam
     for (const ContourOccluder& occluder : occlusions) {
       const int hidden = occluder.HidesEach(pinhole_x.data(), pinhole_y.data(), count, hides.data());
       int shown_maybe = 0;  // shown samples that may be supported
-      for (size_t i = 0; i < samples.size(); ++i) shown_maybe += !hides[i] & (support_state[i] != 0);
+      for (size_t i = 0; i < samples.size(); ++i)
+        shown_maybe += static_cast<int>(hides[i] == 0) & static_cast<int>(support_state[i] != 0);
       const int shown = count - hidden;
       if (hidden < options.occlusion_min_hidden_share * count ||
           shown < options.LeastContourShownShare() * count)
