@@ -238,10 +238,27 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
     if (passage == ContourPassage::kAcross || (pairing.ends_inside && passage != ContourPassage::kNone))
       passing.push_back({&contours[k], passage});
   }
+  const double min_cos = std::cos(30 * M_PI / 180);
+  // Whether another contour across lies beyond `p` on the side of `toward`, within 30 deg of
+  // parallel, neither meeting the other's line there: the far flank of a pole, past which the
+  // outline is in view.
+  auto bounded = [&](const ImageLine& p, const Eigen::Vector2d& toward) {
+    const Eigen::Vector2d dp = (p.b - p.a).normalized();
+    for (const Passing& other : passing) {
+      const ImageLine& q = *other.line;
+      if (other.passage != ContourPassage::kAcross || &q == &p) continue;
+      const Eigen::Vector2d dq = (q.b - q.a).normalized(), nq(-dq.y(), dq.x());
+      if (std::abs(dp.dot(dq)) < min_cos) continue;
+      const double pa = nq.dot(p.a - q.a), pb = nq.dot(p.b - q.a);
+      if (toward.dot(q.a - p.a) > 0 && toward.dot(q.b - p.a) > 0 && pa * pb > 0) return true;
+    }
+    return false;
+  };
   for (const Passing& p : passing) {
     if (p.passage != ContourPassage::kAcross) continue;
     const Eigen::Vector2d d = p.line->b - p.line->a, normal(-d.y(), d.x());
     for (double sign : {1.0, -1.0}) {
+      if (pairing.sides_bounded && bounded(*p.line, sign * normal)) continue;
       ContourOccluder o;
       o.sides[0] = SideOf(*p.line, sign * normal);
       o.count = 1;
@@ -261,7 +278,6 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
         return Eigen::Vector2d::Zero();
     }
   };
-  const double min_cos = std::cos(30 * M_PI / 180);
   for (size_t i = 0; i < passing.size(); ++i) {
     for (size_t j = i + 1; j < passing.size(); ++j) {
       const ImageLine& p = *passing[i].line;

@@ -1692,7 +1692,8 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
       ContourOcclusions(contours, BoxImage(px, visible), &occlusions,
                         {.ends_inside = options_.contour_pole_ends,
                          .across_beside = options_.contour_across_beside,
-                         .pole_tops = options_.contour_pole_tops});
+                         .pole_tops = options_.contour_pole_tops,
+                         .sides_bounded = options_.contour_sides_bounded});
       for (const ContourOccluder& contour : occlusions) {
         Hiding hiding;
         hiding.contour = &contour;

@@ -131,7 +131,8 @@ double OccludedPlacementSupport(const Eigen::Vector3d& size_m, const Camera& cam
                      // measured: render seeds 7-38, 2 fewer blocks half hidden and 1 more false
                      // detection (docs/benchmarks.md, session 53); the pole's top only in the
                      // occlusion pass (RecognizerOptions::contour_pole_tops)
-                     .pole_tops = false});
+                     .pole_tops = false,
+                     .sides_bounded = options.contour_sides_bounded});
   if (occlusions.empty()) return -1;
   thread_local std::vector<OutlineSample> samples;
   thread_local std::vector<uint8_t> support_state;

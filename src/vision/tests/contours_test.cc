@@ -196,6 +196,33 @@ TEST(ContoursTest, OneContourHidesEitherSideAndTwoTheStripBetweenThem) {
   EXPECT_EQ(ways.size(), 4u);
 }
 
+// With pairing.sides_bounded, a contour across the box's image hides no side with another across
+// beyond it (a pole's near flank does not hide the outline past its far flank): the two outer sides
+// and the strip between them are left, each hiding one of the three parts.
+TEST(ContoursTest, WithSidesBoundedASideEndsAtTheContourAcrossBeyondIt) {
+  const BoxImage box = Rectangle();
+  const std::vector<ImageLine> flanks = {{{240, 100}, {240, 400}}, {{270, 100}, {275, 400}}};
+  std::vector<ContourOccluder> ways;
+  ContourOcclusions(flanks, box, &ways, {.sides_bounded = true});
+  ASSERT_EQ(ways.size(), 3u);
+  int strips = 0, left = 0, between = 0, right = 0;
+  for (const ContourOccluder& o : ways) {
+    strips += o.count == 2;
+    left += o.Hides({220, 230}), between += o.Hides({255, 230}), right += o.Hides({290, 230});
+    // No way hides the part between the flanks together with either part beyond them.
+    EXPECT_FALSE(o.Hides({255, 230}) && (o.Hides({220, 230}) || o.Hides({290, 230})));
+  }
+  EXPECT_EQ(left, 1);
+  EXPECT_EQ(between, 1);
+  EXPECT_EQ(right, 1);
+  EXPECT_EQ(strips, 1);
+  // A lone contour across keeps both sides; one far from parallel does not bound it.
+  ContourOcclusions({flanks[0]}, box, &ways, {.sides_bounded = true});
+  EXPECT_EQ(ways.size(), 2u);
+  ContourOcclusions({flanks[0], {{150, 150}, {350, 300}}}, box, &ways, {.sides_bounded = true});
+  EXPECT_EQ(ways.size(), 4u);
+}
+
 // HidesEach (the support-plane source's loop over an outline's samples) answers as Hides at every
 // point: one side, a strip and a pole strip with tops, at random points and at points on the band's
 // and the ends' limits.

@@ -44,7 +44,8 @@
 // between flanks that end inside a pose's image: contour_pole_ends; no-pole-tops: such strips end
 // with their flanks, contour_pole_tops; no-support-pole-ends: not in the support-plane source,
 // support_pole_ends), no-across-beside (no strips between a contour across
-// a pose's image and one beside it: contour_across_beside), contourlen-PX, contourstep-GREY,
+// a pose's image and one beside it: contour_across_beside), no-sides-bounded (a contour across hides
+// its side past another across beyond it too: contour_sides_bounded), contourlen-PX, contourstep-GREY,
 // contourcover-X and contourshown-X (their limits), barescore-X and barecover-X (the lower evidence score
 // behind a contour where the hidden outline shows no edge, and how bare it must be; barescore-1: off),
 // contourlowshown-X and contourlowscore-X (more than
@@ -539,6 +540,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "no-pole-ends") return o->contour_pole_ends = false, std::nullopt;
   if (a == "no-pole-tops") return o->contour_pole_tops = false, std::nullopt;
   if (a == "no-across-beside") return o->contour_across_beside = false, std::nullopt;
+  if (a == "no-sides-bounded") return o->contour_sides_bounded = false, std::nullopt;
   if (a == "no-support-pole-ends") return o->support_pole_ends = false, std::nullopt;
   if (a == "no-rescue") return o->matched_share_rescue = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
@@ -609,7 +611,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (setter == setters.end()) {
     return "unknown ablation (no-support, plane-only, no-polish, no-refit, skip-any-claim, "
            "matched-whole-edges, no-occlusion, no-contours, no-pole-ends, no-pole-tops, no-across-beside, "
-           "no-support-pole-ends, no-rescue, "
+           "no-sides-bounded, no-support-pole-ends, no-rescue, "
            "rescue-X, "
            "rules-only, index-N, "
            "support-N, contourreserve-N, "

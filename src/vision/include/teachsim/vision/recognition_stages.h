@@ -431,6 +431,7 @@ struct ContourPairing {
   bool ends_inside = true;     // contours that end inside the box's image (a pole whose top is in front)
   bool across_beside = false;  // one across with one beside the box (a pole whose far side passes it by)
   bool pole_tops = false;      // a strip whose flanks end inside goes on past their ends by half its width
+  bool sides_bounded = false;  // no side of one across with another across beyond it (the strip instead)
 };
 // The ways the contours that pass through a box's image (PassageThroughBoxImage) can hide part of it:
 // either side of each that runs across it, and the strip between each two of them within 30 deg of
@@ -444,7 +445,9 @@ struct ContourPairing {
 // more than the side of the one across does; what it adds is the far side's bound, past which a longer model
 // would show: AmbiguousExtent). pairing.pole_tops: a strip between flanks of which one or both end
 // inside goes on past those ends by half its width (a round pole's top; ExtendOverPoleTop), the flank
-// beside the box of such a pair lengthened as far that way.
+// beside the box of such a pair lengthened as far that way. pairing.sides_bounded: no side of one
+// across that has another across beyond it, within 30 deg of parallel and neither meeting the
+// other's line (past a pole's far flank the outline is in view; the strip between them is kept).
 void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& box,
                        std::vector<ContourOccluder>* occlusions, ContourPairing pairing = {});
 // Whether a pose hidden in part by a contour occluder goes on past it: an edge that runs from the
