@@ -216,10 +216,16 @@ TEST(ContoursTest, WithSidesBoundedASideEndsAtTheContourAcrossBeyondIt) {
   EXPECT_EQ(between, 1);
   EXPECT_EQ(right, 1);
   EXPECT_EQ(strips, 1);
-  // A lone contour across keeps both sides; one far from parallel does not bound it.
+  // A lone contour across keeps both sides; one that crosses it does not bound it.
   ContourOcclusions({flanks[0]}, box, &ways, {.sides_bounded = true});
   EXPECT_EQ(ways.size(), 2u);
   ContourOcclusions({flanks[0], {{150, 150}, {350, 300}}}, box, &ways, {.sides_bounded = true});
+  EXPECT_EQ(ways.size(), 4u);
+  // Nor one more than 30 deg from parallel (37 deg) whose line meets the first's beyond its end:
+  // each wholly on one side of the other, so only the angle tells them apart from a far flank.
+  const std::vector<ImageLine> apart = {{{240, 150}, {240, 300}}, {{260, 170}, {330, 263}}};
+  for (const ImageLine& line : apart) ASSERT_EQ(PassageThroughBoxImage(line, box), ContourPassage::kAcross);
+  ContourOcclusions(apart, box, &ways, {.sides_bounded = true});
   EXPECT_EQ(ways.size(), 4u);
 }
 

@@ -1595,8 +1595,8 @@ TEST(OcclusionTest, ABarWhoseMiddleAnUnknownPoleHidesIsFoundBesideItsContours) {
   EXPECT_EQ(result->objects.size(), 0u);
 }
 
-// The same bar behind a wider pole, 0.68 of the bar's image: between 0.35 and 0.4 of its outline in
-// view. Found at its pose with contour_low_shown_share at 0.35 (the default), not at 0.4.
+// The same bar behind a wider pole, 0.68 of the bar's image: less than 0.4 of its outline in view.
+// Found at its pose with the default contour_low_shown_share (0.35), not with 0.4.
 TEST(OcclusionTest, ABarWithLessThanFourTenthsOfItsOutlineBesideAPoleIsFoundDownToTheLowShare) {
   const Camera camera = SyntheticCamera();
   const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0, 0, 0.86);
@@ -1605,8 +1605,11 @@ TEST(OcclusionTest, ABarWithLessThanFourTenthsOfItsOutlineBesideAPoleIsFoundDown
   const double centre = camera.Project(bar_pose.translation)->x(), half = 0.34 * (hi - lo);
   DrawPole(&image, centre - half, centre + half);
   ExpectFoundOnlyWith(
-      image, [](RecognizerOptions* o, bool on) { o->contour_low_shown_share = on ? 0.35 : 0.4; }, Bar(),
-      bar_pose);
+      image,
+      [](RecognizerOptions* o, bool on) {
+        o->contour_low_shown_share = on ? RecognizerOptions().contour_low_shown_share : 0.4;
+      },
+      Bar(), bar_pose);
 }
 
 // The cube at `cube_pose` with a dark pole from the middle of its image to 0.3 of its width past it.

@@ -216,12 +216,12 @@ struct RecognizerOptions {
   // recognizer of then and left it off for 3.5 ms more per image). Time: see docs/benchmarks.md,
   // session 53.
   bool support_pole_ends = true;
-  // A contour across a pose's image hides no side with another contour across beyond it, nearly
-  // parallel (ContourPairing::sides_bounded): the near flank of a pole does not hide the outline
-  // past its far flank, which is in view; the strip between them still hides what lies between. In
-  // both the occlusion pass and the support-plane source. Render seeds 7-71 (3900 images), against
-  // off: one false detection fewer (185 -> 184), every found block the same; the dev set unchanged
-  // (docs/benchmarks.md, session 54).
+  // A contour across a pose's image hides no side with another contour across beyond it, within 30
+  // deg of parallel and neither meeting the other's line (ContourPairing::sides_bounded): the near flank of a
+  // pole does not hide the outline past its far flank, which is in view; the strip between them still hides
+  // what lies between. In both the occlusion pass and the support-plane source. Render seeds 7-71 (3900
+  // images), against off: one false detection fewer (185 -> 184), every found block the same; the dev set
+  // unchanged (docs/benchmarks.md, session 54).
   bool contour_sides_bounded = true;
   double contour_min_length_px = 60;
   double contour_min_step_grey = 30;
