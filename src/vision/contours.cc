@@ -238,33 +238,6 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
     if (passage == ContourPassage::kAcross || (pairing.ends_inside && passage != ContourPassage::kNone))
       passing.push_back({&contours[k], passage});
   }
-  const double min_cos = std::cos(30 * M_PI / 180);
-  // Whether another contour across lies beyond `p` on the side of `toward`, within 30 deg of
-  // parallel, neither meeting the other's line there: the far flank of a pole, past which the
-  // outline is in view.
-  auto bounded = [&](const ImageLine& p, const Eigen::Vector2d& toward) {
-    const Eigen::Vector2d dp = (p.b - p.a).normalized();
-    for (const Passing& other : passing) {
-      const ImageLine& q = *other.line;
-      if (other.passage != ContourPassage::kAcross || &q == &p) continue;
-      const Eigen::Vector2d dq = (q.b - q.a).normalized(), nq(-dq.y(), dq.x());
-      if (std::abs(dp.dot(dq)) < min_cos) continue;
-      const double pa = nq.dot(p.a - q.a), pb = nq.dot(p.b - q.a);
-      if (toward.dot(q.a - p.a) > 0 && toward.dot(q.b - p.a) > 0 && pa * pb > 0) return true;
-    }
-    return false;
-  };
-  for (const Passing& p : passing) {
-    if (p.passage != ContourPassage::kAcross) continue;
-    const Eigen::Vector2d d = p.line->b - p.line->a, normal(-d.y(), d.x());
-    for (double sign : {1.0, -1.0}) {
-      if (pairing.sides_bounded && bounded(*p.line, sign * normal)) continue;
-      ContourOccluder o;
-      o.sides[0] = SideOf(*p.line, sign * normal);
-      o.count = 1;
-      out.push_back(o);
-    }
-  }
   // The end of a contour that lies inside the box's image, as the direction in which it runs there
   // (from the end beyond); zero for one across it.
   auto inward = [](const Passing& p) -> Eigen::Vector2d {
@@ -278,6 +251,15 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
         return Eigen::Vector2d::Zero();
     }
   };
+  // The strips between two that pass through (kept to go after the sides), and, with
+  // pairing.sides_bounded, the sides of each contour across that hold another across with which it
+  // makes a strip (bit 0: the side its normal (-d.y, d.x) points to; bit 1: the other): the far
+  // flank of a pole, past which the outline is in view.
+  const double min_cos = std::cos(30 * M_PI / 180);
+  thread_local std::vector<ContourOccluder> strips;
+  thread_local std::vector<uint8_t> bounded_sides;
+  strips.clear();
+  bounded_sides.assign(passing.size(), 0);
   for (size_t i = 0; i < passing.size(); ++i) {
     for (size_t j = i + 1; j < passing.size(); ++j) {
       const ImageLine& p = *passing[i].line;
@@ -297,11 +279,29 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
       const double qa = np.dot(q.a - p.a), qb = np.dot(q.b - p.a);
       const double pa = nq.dot(p.a - q.a), pb = nq.dot(p.b - q.a);
       if (qa * qb <= 0 || pa * pb <= 0) continue;
-      out.push_back(Strip(p, q));
+      strips.push_back(Strip(p, q));
       // The strip's width: the mean distance of q's ends from p's line (two across: no side grows).
-      if (pairing.pole_tops) ExtendOverPoleTop(&out.back(), {ip, iq}, 0.5 * (std::abs(qa) + std::abs(qb)));
+      if (pairing.pole_tops) ExtendOverPoleTop(&strips.back(), {ip, iq}, 0.5 * (std::abs(qa) + std::abs(qb)));
+      if (passing[i].passage == ContourPassage::kAcross && passing[j].passage == ContourPassage::kAcross) {
+        bounded_sides[i] |= qa > 0 ? 1 : 2;
+        bounded_sides[j] |= pa > 0 ? 1 : 2;
+      }
     }
   }
+  // Either side of each across (first), then those strips.
+  for (size_t i = 0; i < passing.size(); ++i) {
+    const Passing& p = passing[i];
+    if (p.passage != ContourPassage::kAcross) continue;
+    const Eigen::Vector2d d = p.line->b - p.line->a, normal(-d.y(), d.x());
+    for (int side = 0; side < 2; ++side) {
+      if (pairing.sides_bounded && (bounded_sides[i] >> side & 1)) continue;
+      ContourOccluder o;
+      o.sides[0] = SideOf(*p.line, (side == 0 ? 1.0 : -1.0) * normal);
+      o.count = 1;
+      out.push_back(o);
+    }
+  }
+  out.insert(out.end(), strips.begin(), strips.end());
   // One that ends inside with a flank beside the box's image (the pole's other side passes the box
   // by): the strip between them, when they are no farther apart than the box's image is wide and end
   // alike. One across with a flank beside (pairing.across_beside): the strip at any distance, the
