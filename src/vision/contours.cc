@@ -341,6 +341,46 @@ void ContourOcclusions(const std::vector<ImageLine>& contours, const BoxImage& b
   }
 }
 
+bool EndsAtContourInside(const BoxImage& inner, const BoxImage& outer,
+                         const std::vector<ImageLine>& contours) {
+  constexpr double kMinEdgePx = 10, kAlongPx = 2.5, kBehindPx = 25, kInsidePx = 2, kPastPx = 10,
+                   kPastShare = 1.0 / 3;
+  auto inside_outer = [&](const Eigen::Vector2d& p) {
+    for (int h = 0; h < outer.hull_size; ++h) {
+      const Eigen::Vector2d& a = outer.px[static_cast<size_t>(outer.hull[h])];
+      const Eigen::Vector2d& b = outer.px[static_cast<size_t>(outer.hull[(h + 1) % outer.hull_size])];
+      const Eigen::Vector2d e = b - a, q = p - a;
+      const double length = e.norm();
+      if (!(length > 0) || (e.x() * q.y() - e.y() * q.x()) < kInsidePx * length) return false;
+    }
+    return outer.hull_size >= 3;
+  };
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  for (int h = 0; h < inner.hull_size; ++h) centre += inner.px[static_cast<size_t>(inner.hull[h])];
+  if (inner.hull_size < 3) return false;
+  centre /= inner.hull_size;
+  for (int h = 0; h < inner.hull_size; ++h) {
+    const Eigen::Vector2d& a = inner.px[static_cast<size_t>(inner.hull[h])];
+    const Eigen::Vector2d& b = inner.px[static_cast<size_t>(inner.hull[(h + 1) % inner.hull_size])];
+    const double length = (b - a).norm();
+    if (!(length >= kMinEdgePx) || !inside_outer(0.5 * (a + b))) continue;
+    const double past = std::max(kPastPx, kPastShare * length);
+    for (const ImageLine& c : contours) {
+      const Eigen::Vector2d d = c.b - c.a;
+      const double contour_length = d.norm();
+      if (!(contour_length > 0)) continue;
+      const Eigen::Vector2d dc = d / contour_length, darker(-dc.y(), dc.x());
+      // Both ends of the edge along the contour or behind it, at most kBehindPx.
+      const double da = darker.dot(a - c.a), db = darker.dot(b - c.a);
+      if (da < -kAlongPx || db < -kAlongPx || da > kBehindPx || db > kBehindPx) continue;
+      if (darker.dot(centre - 0.5 * (a + b)) > 0) continue;  // darker towards the block: not in front
+      const double ta = dc.dot(a - c.a), tb = dc.dot(b - c.a);
+      if (std::min(ta, tb) >= past && contour_length - std::max(ta, tb) >= past) return true;
+    }
+  }
+  return false;
+}
+
 bool AmbiguousExtent(const ModelLibrary& models, int model_index, const geometry::Pose3& camera_T_object,
                      const ContourOccluder& occluder, const Eigen::Matrix3d& K) {
   const Eigen::Vector3d& s = models.models[static_cast<size_t>(model_index)].box_size_m;

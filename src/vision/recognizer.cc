@@ -817,14 +817,29 @@ bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival,
   if (margin <= 0) return false;
   if (candidate.own >= margin) {
     if (rival.own <= kRivalMaxOwnBalance) return true;
+    const double share = candidate.holds_other && options.conflict_within_rank_share > 0
+                             ? std::min(options.conflict_rank_share, options.conflict_within_rank_share)
+                             : options.conflict_rank_share;
     return options.conflict_own_lead > 0 && candidate.own - rival.own >= options.conflict_own_lead &&
-           candidate.rank >= options.conflict_rank_share * rival.rank;
+           candidate.rank >= share * rival.rank;
   }
   // Neither own outline shows: the one more inside the image, at a close rank.
   return options.conflict_in_image_lead > 0 && std::abs(candidate.own) < margin &&
          std::abs(rival.own) < margin &&
          candidate.in_image >= rival.in_image + options.conflict_in_image_lead &&
          candidate.rank >= options.conflict_tie_rank_share * rival.rank;
+}
+
+bool WithinBox(const Model& outer, const geometry::Pose3& camera_T_outer, const Model& inner,
+               const geometry::Pose3& camera_T_inner) {
+  constexpr double kWithinMarginM = 0.005;
+  const geometry::Pose3 outer_T_inner = camera_T_outer.Inverse() * camera_T_inner;
+  const Eigen::Vector3d half = 0.5 * outer.box_size_m + Eigen::Vector3d::Constant(kWithinMarginM);
+  for (int v = 0; v < 8; ++v) {
+    const Eigen::Vector3d p = outer_T_inner * BoxVertex(inner.box_size_m, v);
+    if ((p.cwiseAbs().array() > half.array()).any()) return false;
+  }
+  return true;
 }
 
 PoseEvidence EvaluatePose(const Model& model, const Camera& camera, const geometry::Pose3& camera_T_object,
@@ -1156,7 +1171,13 @@ class RecognitionPass {
   // the slab: seeds 7-15 of the benchmark's renders 1559 -> 1562 found, 38 -> 34 false); a candidate
   // that deeply interpenetrates an accepted one or claims the same image edges is the same object or
   // a wrong one. Returns the accepted candidates' indices.
-  std::vector<size_t> Select();
+  // contours: the occluding contours (a shorter rival ending at one inside a longer candidate's image;
+  // conflict_within_rank_share), or none.
+  std::vector<size_t> Select(const std::vector<ImageLine>* contours);
+  // Whether `inner`'s pose ends at an occluding contour inside `outer`'s image (EndsAtContourInside);
+  // false where either lies partly behind the camera.
+  bool EndsAtContour(const Model& inner, const geometry::Pose3& camera_T_inner, const Model& outer,
+                     const geometry::Pose3& camera_T_outer, const std::vector<ImageLine>& contours) const;
   // 5b. Blocks partly hidden by recognized ones (RecognizerOptions::occlusion_reverify): each pose
   // verification turned down is judged again without the outline the accepted recognitions hide and
   // without the image lines they claim (their edges end where a hidden block's do not). Those that
@@ -1489,7 +1510,23 @@ bool RecognitionPass::Conflicting(const Candidate& c, const Candidate& a) const 
                                 options_) >= kMaxHiddenSupportedSamples;
 }
 
-std::vector<size_t> RecognitionPass::Select() {
+bool RecognitionPass::EndsAtContour(const Model& inner, const geometry::Pose3& camera_T_inner,
+                                    const Model& outer, const geometry::Pose3& camera_T_outer,
+                                    const std::vector<ImageLine>& contours) const {
+  auto image = [&](const Model& model, const geometry::Pose3& pose) -> std::optional<BoxImage> {
+    std::array<Eigen::Vector2d, 8> px;
+    for (int v = 0; v < 8; ++v) {
+      const Eigen::Vector3d p = pose * BoxVertex(model.box_size_m, v);
+      if (!(p.z() > 1e-3)) return std::nullopt;
+      px[static_cast<size_t>(v)] = (K_ * p).hnormalized();
+    }
+    return BoxImage(px, VisibleBoxEdges(model.box_size_m, pose.Inverse().translation));
+  };
+  const std::optional<BoxImage> in = image(inner, camera_T_inner), out = image(outer, camera_T_outer);
+  return in && out && EndsAtContourInside(*in, *out, contours);
+}
+
+std::vector<size_t> RecognitionPass::Select(const std::vector<ImageLine>* contours) {
   std::vector<size_t> order(candidates_.size());
   rank_.assign(candidates_.size(), 0);
   for (size_t i = 0; i < order.size(); ++i) {
@@ -1526,7 +1563,10 @@ std::vector<size_t> RecognitionPass::Select() {
       }
       PairwiseSide own{OwnOutlineBalance(mc, c.camera_T_object, others, camera_, detection_.edge_map,
                                          fixed_edges_, options_),
-                       rank_[i], VisibleOutlineInImage(mc, camera_, c.camera_T_object)};
+                       rank_[i], VisibleOutlineInImage(mc, camera_, c.camera_T_object),
+                       options_.conflict_within_rank_share > 0 && contours != nullptr &&
+                           WithinBox(mc, c.camera_T_object, ma, a.camera_T_object) &&
+                           EndsAtContour(ma, a.camera_T_object, mc, c.camera_T_object, *contours)};
       others.front() = {&mc, c.camera_T_object};
       PairwiseSide rival{OwnOutlineBalance(ma, a.camera_T_object, others, camera_, detection_.edge_map,
                                            fixed_edges_, options_),
@@ -1805,7 +1845,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   const auto t4 = Clock::now();
 
   // 5. consistency and non-maximum suppression; 5b. blocks partly hidden by the accepted ones.
-  std::vector<size_t> accepted = pass.Select();
+  std::vector<size_t> accepted = pass.Select(contours_found ? &contours : nullptr);
   const auto t_occlusion = Clock::now();
   pass.ReverifyOccluded(&accepted, contours_found ? &contours : nullptr);
   const double occlusion_ms = Ms(t_occlusion, Clock::now());

@@ -543,5 +543,43 @@ TEST(ContoursTest, APlacementBesideAPoleWhoseTopIsInFrontNeedsSupportPoleEnds) {
   EXPECT_FALSE(at_bar(true, false, &behind));
 }
 
+// A flat box image: the rectangle [x0, x1] x [y0, y1] with four points inside it (not on its hull).
+BoxImage Flat(double x0, double y0, double x1, double y1) {
+  std::array<Eigen::Vector2d, 8> px = {Eigen::Vector2d(x0, y0), Eigen::Vector2d(x1, y0),
+                                       Eigen::Vector2d(x0, y1), Eigen::Vector2d(x1, y1)};
+  const Eigen::Vector2d middle(0.5 * (x0 + x1), 0.5 * (y0 + y1));
+  for (int v = 4; v < 8; ++v)
+    px[static_cast<size_t>(v)] = middle + Eigen::Vector2d(v & 1 ? 1 : -1, v & 2 ? 1 : -1);
+  return BoxImage(px, 0x0fff);
+}
+
+// A cube's image at the end of a bar's (the cube's right end at x = 245, inside the bar's): it ends at
+// a contour along that end, or up to 25 px in front of it, that runs on past both its corners with its
+// darker side away from the cube (a pole in front); not when the darker side is the cube's, the
+// contour stops short of a corner, lies more than 25 px over the cube or leaves the end 3 px in view,
+// is turned 10 deg about the end's middle, or where the cube's end is the bar's end too, or is under
+// 10 px long.
+TEST(ContoursTest, AShorterPoseEndsAtAContourInsideALongerOnesImage) {
+  const BoxImage cube = Flat(200, 200, 245, 240), bar = Flat(200, 200, 320, 240);
+  const ImageLine pole{{245, 290}, {245, 150}};  // darker side (-d.y, d.x) = +x: away from the cube
+  EXPECT_TRUE(EndsAtContourInside(cube, bar, {pole}));
+  EXPECT_TRUE(EndsAtContourInside(cube, bar, {{{246.5, 290}, {246.5, 150}}}));  // 1.5 px off, in front
+  EXPECT_TRUE(EndsAtContourInside(cube, bar, {{{230, 290}, {230, 150}}}));      // the end 15 px behind it
+  EXPECT_TRUE(EndsAtContourInside(cube, bar, {{{220, 290}, {220, 150}}}));      // 25 px
+  EXPECT_FALSE(EndsAtContourInside(cube, bar, {{{219, 290}, {219, 150}}}));     // 26 px
+  EXPECT_FALSE(EndsAtContourInside(cube, bar, {{{248, 290}, {248, 150}}}));     // the end 3 px in view
+  EXPECT_FALSE(EndsAtContourInside(cube, bar, {{{245, 150}, {245, 290}}}));     // darker towards the cube
+  EXPECT_FALSE(EndsAtContourInside(cube, bar, {{{245, 290}, {245, 195}}}));     // 5 px past one corner
+  EXPECT_FALSE(EndsAtContourInside(cube, bar, {{{245, 290}, {245, 187}}}));     // 13 px: under a third of 40
+  EXPECT_TRUE(EndsAtContourInside(cube, bar, {{{245, 290}, {245, 186}}}));      // 14 px
+  const double turn = 10 * M_PI / 180;
+  const Eigen::Vector2d mid(245, 220), dir(std::sin(turn), -std::cos(turn));
+  EXPECT_FALSE(EndsAtContourInside(cube, bar, {{mid - 70 * dir, mid + 70 * dir}}));  // turned 10 deg
+  EXPECT_FALSE(EndsAtContourInside(cube, Flat(200, 200, 245, 240), {pole}));         // the same end
+  EXPECT_FALSE(EndsAtContourInside(cube, bar, {}));
+  EXPECT_FALSE(EndsAtContourInside(Flat(200, 200, 245, 208), bar, {pole}));  // an end 8 px long
+  EXPECT_TRUE(EndsAtContourInside(Flat(200, 200, 245, 210), bar, {pole}));   // 10 px
+}
+
 }  // namespace
 }  // namespace teachsim::vision

@@ -1296,6 +1296,70 @@ TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInI
   }
 }
 
+// The rank share where the rival lies within the candidate's box (a cube fitted onto the part in view
+// of a bar): the lower conflict_within_rank_share is asked of the candidate that holds its rival, never
+// a higher one, and only when on; the own-outline lead is asked all the same.
+TEST(SelectionTest, ACandidateHoldingItsRivalNeedsTheWithinRankShare) {
+  RecognizerOptions within;
+  within.conflict_balance_margin = 10;
+  within.conflict_own_lead = 10;
+  within.conflict_rank_share = 0.8;
+  within.conflict_within_rank_share = 0.6;
+  RecognizerOptions higher = within;
+  higher.conflict_within_rank_share = 0.9;
+  RecognizerOptions off = within;
+  off.conflict_within_rank_share = 0;
+  struct Case {
+    const char* what;
+    PairwiseSide candidate, rival;
+    const RecognizerOptions& options;
+    bool replaces;
+  } cases[] = {
+      {"holds its rival, rank share 0.64", {35, 64, 1.0, true}, {11, 100, 1.0}, within, true},
+      {"holds its rival, rank share exactly 0.6", {35, 60, 1.0, true}, {11, 100, 1.0}, within, true},
+      {"holds its rival, rank share 0.59", {35, 59, 1.0, true}, {11, 100, 1.0}, within, false},
+      {"holds its rival, lead 9", {20, 90, 1.0, true}, {11, 100, 1.0}, within, false},
+      {"does not hold its rival, rank share 0.64", {35, 64, 1.0, false}, {11, 100, 1.0}, within, false},
+      {"only the rival holds the other", {35, 64, 1.0, false}, {11, 100, 1.0, true}, within, false},
+      {"holds its rival, the within share off", {35, 64, 1.0, true}, {11, 100, 1.0}, off, false},
+      {"holds its rival, a within share above the rank share",
+       {35, 79, 1.0, true},
+       {11, 100, 1.0},
+       higher,
+       false},
+      {"holds its rival, rank share 0.8 with a within share above",
+       {35, 80, 1.0, true},
+       {11, 100, 1.0},
+       higher,
+       true},
+  };
+  for (const Case& c : cases) {
+    EXPECT_EQ(ReplacesRival(c.candidate, c.rival, c.options), c.replaces) << c.what;
+  }
+}
+
+// WithinBox: a cube laid at one end of a bar lies within it, in any yaw of the two together and up to
+// 5 mm out; a cube 6 mm past the bar's end, one turned on it, one beside it, and the bar within the
+// cube do not.
+TEST(SelectionTest, WithinBoxHoldsACubeAtABarsEndAndNothingBesideIt) {
+  const Model bar = Bar(), cube = Cube();
+  for (double yaw : {0.0, 0.7, 2.1}) {
+    const geometry::Pose3 camera_T_bar = geometry::Pose3::FromAxisAngle(
+        Eigen::Vector3d(0.3, -0.5, 0.8).normalized(), yaw, Eigen::Vector3d(0.05, -0.02, 0.6));
+    auto at = [&](double x, double y, double turn_rad) {
+      return camera_T_bar *
+             geometry::Pose3::FromAxisAngle(Eigen::Vector3d::UnitZ(), turn_rad, Eigen::Vector3d(x, y, 0));
+    };
+    EXPECT_TRUE(WithinBox(bar, camera_T_bar, cube, at(0.0225, 0, 0))) << "yaw " << yaw;
+    EXPECT_TRUE(WithinBox(bar, camera_T_bar, cube, at(-0.0225, 0, M_PI / 2))) << "yaw " << yaw;
+    EXPECT_TRUE(WithinBox(bar, camera_T_bar, cube, at(0.0265, 0.004, 0))) << "yaw " << yaw;
+    EXPECT_FALSE(WithinBox(bar, camera_T_bar, cube, at(0.0285, 0, 0))) << "yaw " << yaw;
+    EXPECT_FALSE(WithinBox(bar, camera_T_bar, cube, at(0.0225, 0, 0.4))) << "yaw " << yaw;
+    EXPECT_FALSE(WithinBox(bar, camera_T_bar, cube, at(0.0225, 0.045, 0))) << "yaw " << yaw;
+    EXPECT_FALSE(WithinBox(cube, at(0.0225, 0, 0), bar, camera_T_bar)) << "yaw " << yaw;
+  }
+}
+
 // The evidence score (what verification decides on besides its rules): the true pose of a rendered
 // block scores above accept_evidence_score; the same block's outline moved by a quarter of its length,
 // or turned by 90 degrees about the vertical, scores below min_evidence_score. (A smaller model

@@ -53,12 +53,13 @@
 // off), refitrms-PX,
 // refitcoverage-X, refitscore-X, refitinimage-X (the edge-point refit's limits; no-refit switches it off),
 // balance-N (the non-maximum suppression's pairwise margin; 0: off), ownlead-N and rankshare-X (its second
-// way to replace a rival; ownlead-0: off), inimagelead-X and tieshare-X (its third way, where neither own
-// outline shows; inimagelead-0: off), centreslack-MM (how far beyond its supports' tops an off-table
-// recognition's centre may lie). For teachsim, every scored object is put down to the stage that lost it
-// (vision::ClassifyLoss), per visible-fraction bin. TEACHSIM_RECOGNIZE_RENDER_GAMMA=G renders the
-// scenes as a camera of that gamma writes them (scene::CameraSpec::gamma; default 1, linear), and the
-// recognizer is told it.
+// way to replace a rival; ownlead-0: off; withinshare-X: its rank share where the rival lies within the
+// candidate and ends at an occluding contour inside its image, 0: off), inimagelead-X and tieshare-X (its
+// third way, where neither own outline shows; inimagelead-0: off), centreslack-MM (how far beyond its
+// supports' tops an off-table recognition's centre may lie). For teachsim, every scored object is put down to
+// the stage that lost it (vision::ClassifyLoss), per visible-fraction bin. TEACHSIM_RECOGNIZE_RENDER_GAMMA=G
+// renders the scenes as a camera of that gamma writes them (scene::CameraSpec::gamma; default 1, linear), and
+// the recognizer is told it.
 #include <time.h>
 
 #include <algorithm>
@@ -602,6 +603,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"balance", [o](double v) { o->conflict_balance_margin = static_cast<int>(v); }},
       {"ownlead", [o](double v) { o->conflict_own_lead = static_cast<int>(v); }},
       {"rankshare", [o](double v) { o->conflict_rank_share = v; }},
+      {"withinshare", [o](double v) { o->conflict_within_rank_share = v; }},
       {"inimagelead", [o](double v) { o->conflict_in_image_lead = v; }},
       {"tieshare", [o](double v) { o->conflict_tie_rank_share = v; }},
       {"ownbalance", [o](double v) { o->min_own_balance = static_cast<int>(v); }},
@@ -626,7 +628,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "contourlowshown-X, contourlowscore-X, ladder-MM, laddermargin-X, ladderscore-X, "
            "laddercoverage-X, "
            "refitinimage-X, "
-           "balance-N, ownlead-N, rankshare-X, inimagelead-X, tieshare-X, ownbalance-N, centreslack-MM)";
+           "balance-N, ownlead-N, rankshare-X, withinshare-X, inimagelead-X, tieshare-X, ownbalance-N, "
+           "centreslack-MM)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);

@@ -466,6 +466,16 @@ bool ContinuesPastHiddenEnd(const Model& model, const Camera& camera, const geom
 // intrinsics the occluder's pixels are in.
 bool AmbiguousExtent(const ModelLibrary& models, int model_index, const geometry::Pose3& camera_T_object,
                      const ContourOccluder& occluder, const Eigen::Matrix3d& K);
+// Whether a pose's image ends at an occluding contour inside another's image: an edge of `inner`'s
+// outline (its hull), 10 px long or more, lies along a contour or behind it (both its ends at most
+// 2.5 px on the contour's lighter side and 25 px on its darker side), the contour running on past
+// both the edge's ends by 10 px and a third of the edge's length or more, its darker side away from
+// `inner`'s image (something in front, whose outline goes on where the block's would turn), and the
+// edge's middle inside `outer`'s image (2 px in or more). A shorter model fitted onto the part in
+// view of a longer block whose rest a pole hides ends so, along the pole or a little behind it; a
+// block that ends where it seems to shows its own end edge, which the contour does not run past.
+bool EndsAtContourInside(const BoxImage& inner, const BoxImage& outer,
+                         const std::vector<ImageLine>& contours);
 // The image direction (unit, undistorted px) in which a world point at pixel `px` moves when it
 // rises along the world's z axis (towards or away from the vertical vanishing point).
 Eigen::Vector2d UpImageDirection(const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world, const Eigen::Vector2d& px);
@@ -606,15 +616,23 @@ struct PairwiseSide {
   int own = 0;
   double rank = 0;
   double in_image = 1;
+  // The other side's box lies within this one's (WithinBox) and its image ends at an occluding
+  // contour inside this one's (EndsAtContourInside).
+  bool holds_other = false;
 };
 // The selection's pairwise decision: the candidate replaces its rival when its own balance reaches
 // RecognizerOptions::conflict_balance_margin and either the rival's own is at most 3 (nothing of it
 // alone is in the image), or the candidate's own leads the rival's by conflict_own_lead samples
-// while the candidate ranks at least conflict_rank_share of the rival; or, where neither own balance
+// while the candidate ranks at least conflict_rank_share of the rival (conflict_within_rank_share,
+// when lower, where the candidate holds its rival: PairwiseSide::holds_other); or, where neither own balance
 // reaches the margin (either sign), when a larger share of the candidate's outline is inside the
 // image by conflict_in_image_lead while it ranks at least conflict_tie_rank_share of the rival.
 bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival,
                    const RecognizerOptions& options);
+// Whether `inner`'s box lies within `outer`'s, each of its vertices within 5 mm of it: a shorter
+// model fitted onto the part in view of a longer block (a cube on a bar's end).
+bool WithinBox(const Model& outer, const geometry::Pose3& camera_T_outer, const Model& inner,
+               const geometry::Pose3& camera_T_inner);
 struct PoseEvidence {
   double matched_fraction = 0;  // of the visible predicted edge length covered by matched lines
   double support_fraction = 0;  // of the informative sample points along the visible edges (an edge pixel
