@@ -1254,7 +1254,9 @@ TEST(SelectionTest, ARecognitionTheOthersExplainAwayIsDropped) {
 // not in the image does not replace by evidence; one whose rival's own outline is not either does;
 // where both own outlines show, the candidate needs the lead and the rank share; where neither shows,
 // the one whose outline is more inside the image replaces at a close rank; no way works when
-// switched off.
+// switched off. A candidate that holds its rival (a cube fitted onto the part in view of a bar that a
+// pole hides in part: PairwiseSide::holds_other) needs the lower conflict_within_rank_share, never a
+// higher one, only when on, and the own-outline lead all the same.
 TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInImage) {
   RecognizerOptions defaults;
   defaults.conflict_balance_margin = 10;
@@ -1268,6 +1270,12 @@ TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInI
   no_tie.conflict_in_image_lead = 0;
   RecognizerOptions off = defaults;
   off.conflict_balance_margin = 0;
+  RecognizerOptions within = defaults;
+  within.conflict_within_rank_share = 0.6;
+  RecognizerOptions within_higher = defaults;
+  within_higher.conflict_within_rank_share = 0.9;
+  RecognizerOptions within_off = defaults;
+  within_off.conflict_within_rank_share = 0;
   struct Case {
     const char* what;
     PairwiseSide candidate, rival;
@@ -1281,8 +1289,16 @@ TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInI
       {"both show, lead 9", {40, 100, 1.0}, {31, 100, 1.0}, defaults, false},
       {"both show, rank share under 0.8", {31, 72.9, 1.0}, {9, 138.7, 1.0}, defaults, false},
       {"both show, the lead switched off", {88, 277.7, 1.0}, {73, 285.0, 1.0}, no_lead, false},
-      {"neither shows, more inside the image, close rank", {2, 321.2, 0.647}, {0, 322.4, 0.490}, defaults, true},
-      {"neither shows, negative balances count as not showing", {-9, 100, 0.85}, {-9, 100, 0.7}, defaults, true},
+      {"neither shows, more inside the image, close rank",
+       {2, 321.2, 0.647},
+       {0, 322.4, 0.490},
+       defaults,
+       true},
+      {"neither shows, negative balances count as not showing",
+       {-9, 100, 0.85},
+       {-9, 100, 0.7},
+       defaults,
+       true},
       {"neither shows, in-image lead under 0.1", {0, 400, 0.79}, {0, 400, 0.70}, defaults, false},
       {"neither shows, rank share under 0.85", {0, 213.1, 0.858}, {0, 287.3, 0.571}, defaults, false},
       {"neither shows, the rival more inside the image", {0, 400, 0.5}, {0, 300, 1.0}, defaults, false},
@@ -1290,47 +1306,22 @@ TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInI
       {"neither shows, the in-image rule switched off", {2, 321.2, 0.647}, {0, 322.4, 0.490}, no_tie, false},
       {"the whole test switched off", {50, 300, 1.0}, {0, 100, 0.5}, off, false},
       {"the whole test switched off, neither shows", {0, 300, 1.0}, {0, 300, 0.5}, off, false},
-  };
-  for (const Case& c : cases) {
-    EXPECT_EQ(ReplacesRival(c.candidate, c.rival, c.options), c.replaces) << c.what;
-  }
-}
-
-// The rank share where the rival lies within the candidate's box (a cube fitted onto the part in view
-// of a bar): the lower conflict_within_rank_share is asked of the candidate that holds its rival, never
-// a higher one, and only when on; the own-outline lead is asked all the same.
-TEST(SelectionTest, ACandidateHoldingItsRivalNeedsTheWithinRankShare) {
-  RecognizerOptions within;
-  within.conflict_balance_margin = 10;
-  within.conflict_own_lead = 10;
-  within.conflict_rank_share = 0.8;
-  within.conflict_within_rank_share = 0.6;
-  RecognizerOptions higher = within;
-  higher.conflict_within_rank_share = 0.9;
-  RecognizerOptions off = within;
-  off.conflict_within_rank_share = 0;
-  struct Case {
-    const char* what;
-    PairwiseSide candidate, rival;
-    const RecognizerOptions& options;
-    bool replaces;
-  } cases[] = {
       {"holds its rival, rank share 0.64", {35, 64, 1.0, true}, {11, 100, 1.0}, within, true},
       {"holds its rival, rank share exactly 0.6", {35, 60, 1.0, true}, {11, 100, 1.0}, within, true},
       {"holds its rival, rank share 0.59", {35, 59, 1.0, true}, {11, 100, 1.0}, within, false},
       {"holds its rival, lead 9", {20, 90, 1.0, true}, {11, 100, 1.0}, within, false},
       {"does not hold its rival, rank share 0.64", {35, 64, 1.0, false}, {11, 100, 1.0}, within, false},
       {"only the rival holds the other", {35, 64, 1.0, false}, {11, 100, 1.0, true}, within, false},
-      {"holds its rival, the within share off", {35, 64, 1.0, true}, {11, 100, 1.0}, off, false},
+      {"holds its rival, the within share off", {35, 64, 1.0, true}, {11, 100, 1.0}, within_off, false},
       {"holds its rival, a within share above the rank share",
        {35, 79, 1.0, true},
        {11, 100, 1.0},
-       higher,
+       within_higher,
        false},
       {"holds its rival, rank share 0.8 with a within share above",
        {35, 80, 1.0, true},
        {11, 100, 1.0},
-       higher,
+       within_higher,
        true},
   };
   for (const Case& c : cases) {
