@@ -355,9 +355,9 @@ bool EndsAtContourInside(const BoxImage& inner, const BoxImage& outer,
     }
     return outer.hull_size >= 3;
   };
+  if (inner.hull_size < 3) return false;
   Eigen::Vector2d centre = Eigen::Vector2d::Zero();
   for (int h = 0; h < inner.hull_size; ++h) centre += inner.px[static_cast<size_t>(inner.hull[h])];
-  if (inner.hull_size < 3) return false;
   centre /= inner.hull_size;
   for (int h = 0; h < inner.hull_size; ++h) {
     const Eigen::Vector2d& a = inner.px[static_cast<size_t>(inner.hull[h])];

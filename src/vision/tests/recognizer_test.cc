@@ -11,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 #include <optional>
 #include <random>
+#include <type_traits>
 
 #include "../model_editor.h"
 #include "synthetic_scene.h"
@@ -1264,18 +1265,18 @@ TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInI
   defaults.conflict_rank_share = 0.8;
   defaults.conflict_in_image_lead = 0.1;
   defaults.conflict_tie_rank_share = 0.85;
-  RecognizerOptions no_lead = defaults;
-  no_lead.conflict_own_lead = 0;
-  RecognizerOptions no_tie = defaults;
-  no_tie.conflict_in_image_lead = 0;
-  RecognizerOptions off = defaults;
-  off.conflict_balance_margin = 0;
-  RecognizerOptions within = defaults;
-  within.conflict_within_rank_share = 0.6;
-  RecognizerOptions within_higher = defaults;
-  within_higher.conflict_within_rank_share = 0.9;
-  RecognizerOptions within_off = defaults;
-  within_off.conflict_within_rank_share = 0;
+  // The defaults with one option changed.
+  auto with = [&defaults](auto RecognizerOptions::*option, double value) {
+    RecognizerOptions o = defaults;
+    o.*option = static_cast<std::remove_reference_t<decltype(o.*option)>>(value);
+    return o;
+  };
+  const RecognizerOptions no_lead = with(&RecognizerOptions::conflict_own_lead, 0);
+  const RecognizerOptions no_tie = with(&RecognizerOptions::conflict_in_image_lead, 0);
+  const RecognizerOptions off = with(&RecognizerOptions::conflict_balance_margin, 0);
+  const RecognizerOptions within = with(&RecognizerOptions::conflict_within_rank_share, 0.6);
+  const RecognizerOptions within_higher = with(&RecognizerOptions::conflict_within_rank_share, 0.9);
+  const RecognizerOptions within_off = with(&RecognizerOptions::conflict_within_rank_share, 0);
   struct Case {
     const char* what;
     PairwiseSide candidate, rival;
