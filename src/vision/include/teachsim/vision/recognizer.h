@@ -238,8 +238,12 @@ struct RecognizerOptions {
   // unchanged (5790, 75); held out, seeds 39-71: 236 -> 241, 25 -> 28, 5821, false 107 -> 110 (all
   // three a longer model laid from the part in view of a block cut by the pole or the image border;
   // one of them displaced a cube found at 0.4); the dev set unchanged.
+  // contour_low_shown_score 0.985 since session 57 (0.996 before): render seeds 7-38 (chosen on, of
+  // 0.93, 0.97 and 0.985), found 0.4-0.7 visible 268 -> 275, < 0.4 25 -> 28, false detections 74 -> 76;
+  // held out, seeds 39-71: 241 -> 249, 28 -> 36, false 107 -> 110; no block lost, >= 0.7 visible and
+  // unoccluded unchanged. A trade: 26 blocks more for 5 false detections more.
   double contour_low_shown_share = 0.35;
-  double contour_low_shown_score = 0.996;
+  double contour_low_shown_score = 0.985;
   // Behind an occluding contour, a pose whose hidden outline shows (almost) no edge (at most
   // contour_bare_max_coverage of its samples supported, 0 included: it lies on a uniform occluder, as
   // on the benchmark's dark cylinder) is accepted by the occlusion pass with an evidence score of at
