@@ -99,6 +99,11 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_in_image_lead", conflict_in_image_lead));
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_tie_rank_share", conflict_tie_rank_share));
   TEACHSIM_RETURN_IF_ERROR(non_negative("max_alternative_fits", max_alternative_fits, " (0: none)"));
+  if (!(support_tight_fit_shift_px >= 0) || !std::isfinite(support_tight_fit_shift_px)) {
+    return Status::InvalidInput(
+        "RecognizerOptions::support_tight_fit_shift_px = " + json::FormatNumber(support_tight_fit_shift_px) +
+        " must be >= 0 (0: no second fit)");
+  }
   TEACHSIM_RETURN_IF_ERROR(positive("alternatives_per_model", alternatives_per_model));
   TEACHSIM_RETURN_IF_ERROR(positive("support_perpendicular_tol_deg", support_perpendicular_tol_deg));
   TEACHSIM_RETURN_IF_ERROR(positive("support_vertical_tol_deg", support_vertical_tol_deg));
@@ -1384,9 +1389,23 @@ void RecognitionPass::VerifyFitted(int model_index, const HypothesisFit& fitted,
 void RecognitionPass::FitOnSupport(int model_index, int kind, const geometry::Pose3& initial, Judged judged) {
   RecognitionTrace::Fitted* traced = StartTrace(model_index, kind, initial);
   const Model& model = models_.models[static_cast<size_t>(model_index)];
-  VerifyFitted(model_index,
-               FitSupportHypothesis(model, K_, camera_.camera_T_world(), initial, lines_, options_), traced,
-               judged);
+  // Where the fit drifted off its start (a half-hidden block's hidden edges matched to lines beside
+  // them), the start fitted again matching tightly, and verified too when it ends elsewhere.
+  const HypothesisFit loose =
+      FitSupportHypothesis(model, K_, camera_.camera_T_world(), initial, lines_, options_);
+  VerifyFitted(model_index, loose, traced, judged);
+  if (options_.support_tight_fit_shift_px <= 0 ||
+      MeanVertexShiftPx(model, K_, initial, loose.fit.camera_T_object) <=
+          options_.support_tight_fit_shift_px) {
+    return;
+  }
+  const HypothesisFit tight =
+      FitSupportHypothesis(model, K_, camera_.camera_T_world(), initial, lines_, options_, true);
+  if (tight.failed || (!loose.failed && MeanVertexShiftPx(model, K_, loose.fit.camera_T_object,
+                                                          tight.fit.camera_T_object) <= 1.5)) {
+    return;
+  }
+  VerifyFitted(model_index, tight, StartTrace(model_index, kind, initial), judged);
 }
 
 void RecognitionPass::FitSupportHypotheses(const std::vector<ImageCorner>& corners,

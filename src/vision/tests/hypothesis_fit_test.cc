@@ -26,15 +26,6 @@ geometry::Pose3 OnTable(const Eigen::Vector3d& size, double x, double y, double 
   return {Eigen::Quaterniond(Eigen::AngleAxisd(yaw_rad, Eigen::Vector3d::UnitZ())), {x, y, size.z() / 2}};
 }
 
-// Mean distance of the projected vertices of two poses of a box, px (vertex i to vertex i).
-double VertexDistancePx(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& a, const geometry::Pose3& b) {
-  double sum = 0;
-  for (int i = 0; i < 8; ++i) {
-    sum += ((K * (a * BoxVertex(model.box_size_m, i))).hnormalized() - (K * (b * BoxVertex(model.box_size_m, i))).hnormalized()).norm();
-  }
-  return sum / 8;
-}
-
 // The visible edges of a box at a pose as image lines (the middle 80 % of each), undistorted px.
 std::vector<ImageLine> EdgeLines(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_object,
                                  std::vector<int>* edges = nullptr) {
@@ -106,12 +97,12 @@ TEST(HypothesisFitTest, ARenderedBlockConvergesFromAStart15PxAnd10DegOff) {
       start.translation.head<2>() += shift;
       start.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(10 * M_PI / 180, Eigen::Vector3d::UnitZ())) * start.rotation;
       const geometry::Pose3 camera_T_start = camera.camera_T_world() * start;
-      const double start_px = VertexDistancePx(bar, K, camera_T_start, camera_T_truth);
+      const double start_px = MeanVertexShiftPx(bar, K, camera_T_start, camera_T_truth);
       EXPECT_GT(start_px, 12);
       const HypothesisFit fitted =
           FitSupportHypothesis(bar, K, camera.camera_T_world(), camera_T_start, detection.lines, options);
       EXPECT_FALSE(fitted.failed) << "yaw " << yaw << ", start " << start_px << " px off";
-      EXPECT_LT(VertexDistancePx(bar, K, fitted.fit.camera_T_object, camera_T_truth), 0.5)
+      EXPECT_LT(MeanVertexShiftPx(bar, K, fitted.fit.camera_T_object, camera_T_truth), 0.5)
           << "yaw " << yaw << ", start " << start_px << " px off";
     }
   }
@@ -149,11 +140,11 @@ TEST(HypothesisFitTest, AParallelLine3PxBesideAnEdgeDoesNotPullTheFit) {
   const EdgeMatchSet all = MatchEdges(bar, K, camera_T_start, lines, options.match_distance_px,
                                       options.match_angle_deg * M_PI / 180);
   const FitResult plain = FitPoseToLines(bar.box_size_m, K, camera_T_start, all.matches, 20, options.huber_px);
-  EXPECT_GT(VertexDistancePx(bar, K, plain.camera_T_object, camera_T_truth), 0.3);
+  EXPECT_GT(MeanVertexShiftPx(bar, K, plain.camera_T_object, camera_T_truth), 0.3);
 
   const HypothesisFit support = FitSupportHypothesis(bar, K, camera.camera_T_world(), camera_T_start, lines, options);
   ASSERT_FALSE(support.failed);
-  EXPECT_LT(VertexDistancePx(bar, K, support.fit.camera_T_object, camera_T_truth), 0.05);
+  EXPECT_LT(MeanVertexShiftPx(bar, K, support.fit.camera_T_object, camera_T_truth), 0.05);
 
   // The index path from three of the block's own edges as the group's correspondences.
   std::vector<LineMatch> seed;
@@ -162,7 +153,37 @@ TEST(HypothesisFitTest, AParallelLine3PxBesideAnEdgeDoesNotPullTheFit) {
   camera_T_index.translation.z() += 0.004;  // off the plane too
   const HypothesisFit index = FitIndexHypothesis(bar, K, camera_T_index, seed, lines, options);
   ASSERT_FALSE(index.failed);
-  EXPECT_LT(VertexDistancePx(bar, K, index.fit.camera_T_object, camera_T_truth), 0.05);
+  EXPECT_LT(MeanVertexShiftPx(bar, K, index.fit.camera_T_object, camera_T_truth), 0.05);
+}
+
+// A block half hidden beside another of its model: three of its edges have lines, all of the
+// other's do, some 10 mm and 7 deg away. Matching loosely first (3 match distances), the fit from
+// the hidden block's own pose leaves it for the other, which explains more line length; matching
+// tightly from the start (tight = true) it stays. The recognizer verifies both poses where the
+// first drifted (RecognizerOptions::support_tight_fit_shift_px).
+TEST(HypothesisFitTest, ATightFitStaysOnAHalfHiddenBlockThatTheLooseFitLeaves) {
+  const Camera camera = SyntheticCamera();
+  const Eigen::Matrix3d K = camera.K();
+  const Model bar = Bar();
+  const RecognizerOptions options;
+  const geometry::Pose3 camera_T_truth = camera.camera_T_world() * OnTable(bar.box_size_m, 0.02, 0.0, 0.5);
+  const geometry::Pose3 camera_T_other = camera.camera_T_world() * OnTable(bar.box_size_m, 0.03, 0.006, 0.62);
+  std::vector<int> edges;
+  std::vector<ImageLine> lines = EdgeLines(bar, K, camera_T_truth, &edges);
+  lines.resize(3);
+  const std::vector<ImageLine> other = EdgeLines(bar, K, camera_T_other);
+  lines.insert(lines.end(), other.begin(), other.end());
+
+  const HypothesisFit loose =
+      FitSupportHypothesis(bar, K, camera.camera_T_world(), camera_T_truth, lines, options);
+  const HypothesisFit tight =
+      FitSupportHypothesis(bar, K, camera.camera_T_world(), camera_T_truth, lines, options, true);
+  ASSERT_FALSE(loose.failed);
+  ASSERT_FALSE(tight.failed);
+  EXPECT_GT(MeanVertexShiftPx(bar, K, loose.fit.camera_T_object, camera_T_truth),
+            2 * options.match_distance_px);
+  EXPECT_LT(MeanVertexShiftPx(bar, K, loose.fit.camera_T_object, camera_T_other), 0.05);
+  EXPECT_LT(MeanVertexShiftPx(bar, K, tight.fit.camera_T_object, camera_T_truth), 0.05);
 }
 
 TEST(HypothesisFitTest, OnEdgeMatchesKeepsASplitEdgesPiecesAndDropsALineBesideIt) {

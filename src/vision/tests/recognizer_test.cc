@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -579,6 +580,10 @@ TEST(OptionsTest, ValidateNamesTheField) {
       {"support_corner_ridge_min_corners",
        [](RecognizerOptions& r) { r.support_corner_ridge_min_corners = -1; }},
       {"support_contour_reserve", [](RecognizerOptions& r) { r.support_contour_reserve = -1; }},
+      {"support_tight_fit_shift_px = -1 must be >= 0",
+       [](RecognizerOptions& r) { r.support_tight_fit_shift_px = -1; }},
+      {"support_tight_fit_shift_px = nan must be >= 0",
+       [](RecognizerOptions& r) { r.support_tight_fit_shift_px = std::nan(""); }},
   };
   for (const auto& [field, set] : limits) {
     o = RecognizerOptions();

@@ -608,6 +608,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"tieshare", [o](double v) { o->conflict_tie_rank_share = v; }},
       {"ownbalance", [o](double v) { o->min_own_balance = static_cast<int>(v); }},
       {"centreslack", [o](double v) { o->support_centre_slack_m = v / 1000; }},
+      {"tightfit", [o](double v) { o->support_tight_fit_shift_px = v; }},
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
@@ -629,7 +630,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "laddercoverage-X, "
            "refitinimage-X, "
            "balance-N, ownlead-N, rankshare-X, withinshare-X, inimagelead-X, tieshare-X, ownbalance-N, "
-           "centreslack-MM)";
+           "centreslack-MM, tightfit-PX)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);

@@ -250,10 +250,16 @@ struct HypothesisFit {
 // and 1 times options.match_distance_px (each round on the lines on their edges, OnEdgeMatches; the
 // last with Tukey's biweight), ending at the start or round that explains the most line length within
 // 2 px (ExplainedLengthPx); then (options.support_refine_6dof) in 6 DOF, the free pose kept when it
-// matches at least as much of the outline with no larger residual and explains no less.
-HypothesisFit FitSupportHypothesis(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& camera_T_world,
-                                   const geometry::Pose3& initial, const std::vector<ImageLine>& lines,
-                                   const RecognizerOptions& options);
+// matches at least as much of the outline with no larger residual and explains no less. `tight`: all
+// three rounds match within 1 match distance (the recognizer's second fit of a hypothesis whose
+// loose fit drifted off its start, RecognizerOptions::support_tight_fit_shift_px).
+HypothesisFit FitSupportHypothesis(const Model& model, const Eigen::Matrix3d& K,
+                                   const geometry::Pose3& camera_T_world, const geometry::Pose3& initial,
+                                   const std::vector<ImageLine>& lines, const RecognizerOptions& options,
+                                   bool tight = false);
+// Mean distance between the projections of a box's corresponding vertices at two poses, px.
+double MeanVertexShiftPx(const Model& model, const Eigen::Matrix3d& K, const geometry::Pose3& a,
+                         const geometry::Pose3& b);
 // An index hypothesis: first on its group's own correspondences (seed_matches), then three rounds on
 // the predicted edges' matches within 3, 1.5 and 1 times options.match_distance_px (the later two on
 // the lines on their edges, the last with Tukey's biweight), ending at the round that explains the

@@ -109,6 +109,16 @@ struct RecognizerOptions {
   double support_perpendicular_tol_deg = 8;  // two horizontal arms on the plane must be this close to 90 deg
   double support_vertical_tol_deg = 4;       // an arm this close to the image vertical may be the vertical edge
   bool support_refine_6dof = true;           // after the fit on the plane, a 6-DOF fit kept when it explains more edges
+  // A support hypothesis whose fit (matching within 3 match distances first) ended more than this far
+  // from its start (MeanVertexShiftPx) is fitted a second time matching within one match distance
+  // from the start, and that pose is verified too when it ends more than 1.5 px from the first. A
+  // block half hidden beside another block's or the occluder's edges: the loose first round takes
+  // those lines for its hidden edges' and the fit leaves the block for a pose that explains more line
+  // length. 0: no second fit. Session 58, chosen on seeds 7-38 from 2, 4 and 6 px: 4 gave 5790 / 275
+  // / 28, 76 -> 5794 / 280 / 28, 77 (>= 0.7 / 0.4-0.7 / < 0.4 visible found, false detections); held
+  // out, seeds 39-71: 5822 / 249 / 36, 110 -> 5822 / 254 / 37, 110 (docs/benchmarks.md). The same
+  // second fit for index hypotheses (from the group's own fit) found nothing more on seeds 7-38.
+  double support_tight_fit_shift_px = 4;
   // Other models at a candidate's place (AlternativeHypotheses): for each pose that passed verification
   // and rests on a plane, the other models laid from its bottom corners along its horizontal edges,
   // best edge support first, and this many of them fitted and verified, so that where a wrong model
