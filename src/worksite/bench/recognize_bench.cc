@@ -545,7 +545,9 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "no-support-pole-ends") return o->support_pole_ends = false, std::nullopt;
   if (a == "no-rescue") return o->matched_share_rescue = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
-  const std::size_t dash = a.rfind('-');
+  // NAME-VALUE at the first dash (no NAME below holds one), so that a negative VALUE ("tightfit--1")
+  // reaches Validate and its message.
+  const std::size_t dash = a.find('-');
   const std::string name = dash == std::string::npos ? a : a.substr(0, dash);
   const std::string text = dash == std::string::npos ? "" : a.substr(dash + 1);
   char* end = nullptr;
