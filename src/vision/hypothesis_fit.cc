@@ -155,7 +155,8 @@ HypothesisFit FitSupportHypothesis(const Model& model, const Eigen::Matrix3d& K,
   RobustLoss best_loss = huber;
   double best_explained = explained(initial);
   bool improved = false;
-  const double loose[3] = {tight ? 1.0 : 3.0, tight ? 1.0 : 1.5, 1.0};
+  static constexpr double kLoose[3] = {3.0, 1.5, 1.0}, kTight[3] = {1.0, 1.0, 1.0};
+  const double* loose = tight ? kTight : kLoose;
   std::vector<LineMatch> first_matches;
   for (int round = 0; round < 3; ++round) {
     const EdgeMatchSet set = MatchEdges(model, K, fit.camera_T_object, lines, loose[round] * options.match_distance_px,

@@ -1401,8 +1401,9 @@ void RecognitionPass::FitOnSupport(int model_index, int kind, const geometry::Po
   }
   const HypothesisFit tight =
       FitSupportHypothesis(model, K_, camera_.camera_T_world(), initial, lines_, options_, true);
+  constexpr double kSamePosePx = 1.5;  // a tight fit this close to the loose one adds nothing
   if (tight.failed || (!loose.failed && MeanVertexShiftPx(model, K_, loose.fit.camera_T_object,
-                                                          tight.fit.camera_T_object) <= 1.5)) {
+                                                          tight.fit.camera_T_object) <= kSamePosePx)) {
     return;
   }
   VerifyFitted(model_index, tight, StartTrace(model_index, kind, initial), judged);
