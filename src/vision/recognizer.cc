@@ -98,6 +98,8 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_rank_share", conflict_rank_share));
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_in_image_lead", conflict_in_image_lead));
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_tie_rank_share", conflict_tie_rank_share));
+  TEACHSIM_RETURN_IF_ERROR(fraction("conflict_rms_ratio", conflict_rms_ratio));
+  TEACHSIM_RETURN_IF_ERROR(fraction("conflict_score_lead", conflict_score_lead));
   TEACHSIM_RETURN_IF_ERROR(non_negative("max_alternative_fits", max_alternative_fits, " (0: none)"));
   if (!(support_tight_fit_shift_px >= 0) || !std::isfinite(support_tight_fit_shift_px)) {
     return Status::InvalidInput(
@@ -822,6 +824,11 @@ bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival,
   if (margin <= 0) return false;
   if (candidate.own >= margin) {
     if (rival.own <= kRivalMaxOwnBalance) return true;
+    if (options.conflict_rms_ratio > 0 && candidate.model != rival.model &&
+        candidate.rms_px <= options.conflict_rms_ratio * rival.rms_px &&
+        candidate.score >= rival.score + options.conflict_score_lead) {
+      return true;
+    }
     const double share = candidate.holds_other && options.conflict_within_rank_share > 0
                              ? std::min(options.conflict_rank_share, options.conflict_within_rank_share)
                              : options.conflict_rank_share;
@@ -1583,15 +1590,23 @@ std::vector<size_t> RecognitionPass::Select(const std::vector<ImageLine>* contou
       }
       PairwiseSide own{OwnOutlineBalance(mc, c.camera_T_object, others, camera_, detection_.edge_map,
                                          fixed_edges_, options_),
-                       rank_[i], VisibleOutlineInImage(mc, camera_, c.camera_T_object),
+                       rank_[i],
+                       VisibleOutlineInImage(mc, camera_, c.camera_T_object),
                        options_.conflict_within_rank_share > 0 && contours != nullptr &&
                            WithinBox(mc, c.camera_T_object, ma, a.camera_T_object) &&
-                           EndsAtContour(ma, a.camera_T_object, mc, c.camera_T_object, *contours)};
+                           EndsAtContour(ma, a.camera_T_object, mc, c.camera_T_object, *contours),
+                       c.rms_px,
+                       c.rank_score,
+                       c.model};
       others.front() = {&mc, c.camera_T_object};
       PairwiseSide rival{OwnOutlineBalance(ma, a.camera_T_object, others, camera_, detection_.edge_map,
                                            fixed_edges_, options_),
                          rank_[accepted[conflicts[0]]],
-                         VisibleOutlineInImage(ma, camera_, a.camera_T_object)};
+                         VisibleOutlineInImage(ma, camera_, a.camera_T_object),
+                         false,
+                         a.rms_px,
+                         a.rank_score,
+                         a.model};
       if (ReplacesRival(own, rival, options_)) accepted[conflicts[0]] = i;
     }
   }

@@ -626,6 +626,13 @@ TEST(OptionsTest, ValidateNamesTheField) {
   o.conflict_tie_rank_share = 2;
   EXPECT_NE(o.Validate().message().find("conflict_tie_rank_share = 2 must be in [0, 1]"), std::string::npos);
   o.conflict_tie_rank_share = 0.85;
+  o.conflict_rms_ratio = 1.5;
+  EXPECT_NE(o.Validate().message().find("conflict_rms_ratio = 1.5 must be in [0, 1]"), std::string::npos);
+  o.conflict_rms_ratio = 0;  // off: valid
+  EXPECT_TRUE(o.Validate().ok());
+  o.conflict_score_lead = std::nan("");
+  EXPECT_NE(o.Validate().message().find("conflict_score_lead = "), std::string::npos);
+  o.conflict_score_lead = 0.03;
   o.support_centre_slack_m = -0.001;
   EXPECT_NE(o.Validate().message().find("support_centre_slack_m = -0.001 must be >= 0"), std::string::npos);
   o.support_centre_slack_m = 0;
@@ -1262,7 +1269,10 @@ TEST(SelectionTest, ARecognitionTheOthersExplainAwayIsDropped) {
 // the one whose outline is more inside the image replaces at a close rank; no way works when
 // switched off. A candidate that holds its rival (a cube fitted onto the part in view of a bar that a
 // pole hides in part: PairwiseSide::holds_other) needs the lower conflict_within_rank_share, never a
-// higher one, only when on, and the own-outline lead all the same.
+// higher one, only when on, and the own-outline lead all the same. A candidate of another model
+// whose own outline shows replaces its rival when its lines fit it at half the rival's RMS or closer
+// and its evidence score leads by 0.03, whatever the ranks (seed 8 image 2: a bar the right model,
+// fitted to 0.16 px, under a slab fitted to 0.82 px that outranked it).
 TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInImage) {
   RecognizerOptions defaults;
   defaults.conflict_balance_margin = 10;
@@ -1270,6 +1280,8 @@ TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInI
   defaults.conflict_rank_share = 0.8;
   defaults.conflict_in_image_lead = 0.1;
   defaults.conflict_tie_rank_share = 0.85;
+  defaults.conflict_rms_ratio = 0.5;
+  defaults.conflict_score_lead = 0.03;
   // The defaults with one option changed.
   auto with = [&defaults](auto RecognizerOptions::*option, double value) {
     RecognizerOptions o = defaults;
@@ -1282,6 +1294,7 @@ TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInI
   const RecognizerOptions within = with(&RecognizerOptions::conflict_within_rank_share, 0.6);
   const RecognizerOptions within_higher = with(&RecognizerOptions::conflict_within_rank_share, 0.9);
   const RecognizerOptions within_off = with(&RecognizerOptions::conflict_within_rank_share, 0);
+  const RecognizerOptions rms_off = with(&RecognizerOptions::conflict_rms_ratio, 0);
   struct Case {
     const char* what;
     PairwiseSide candidate, rival;
@@ -1329,6 +1342,41 @@ TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInI
        {11, 100, 1.0},
        within_higher,
        true},
+      {"another model, closer fit and higher score",
+       {29, 112, 1.0, false, 0.16, 0.992, 1},
+       {23, 126, 1.0, false, 0.82, 0.939, 3},
+       defaults,
+       true},
+      {"another model, RMS exactly half and score lead exactly 0.03",
+       {20, 50, 1.0, false, 0.25, 0.93, 1},
+       {40, 100, 1.0, false, 0.5, 0.9, 3},
+       defaults,
+       true},
+      {"another model, RMS over half",
+       {20, 50, 1.0, false, 0.26, 0.93, 1},
+       {40, 100, 1.0, false, 0.5, 0.9, 3},
+       defaults,
+       false},
+      {"another model, score lead 0.02",
+       {20, 50, 1.0, false, 0.2, 0.92, 1},
+       {40, 100, 1.0, false, 0.5, 0.9, 3},
+       defaults,
+       false},
+      {"the same model, closer fit and higher score",
+       {29, 112, 1.0, false, 0.16, 0.992, 3},
+       {23, 126, 1.0, false, 0.82, 0.939, 3},
+       defaults,
+       false},
+      {"another model, closer fit, own outline under the margin",
+       {9, 112, 1.0, false, 0.16, 0.992, 1},
+       {23, 126, 1.0, false, 0.82, 0.939, 3},
+       defaults,
+       false},
+      {"another model, closer fit, the RMS way switched off",
+       {29, 112, 1.0, false, 0.16, 0.992, 1},
+       {23, 126, 1.0, false, 0.82, 0.939, 3},
+       rms_off,
+       false},
   };
   for (const Case& c : cases) {
     EXPECT_EQ(ReplacesRival(c.candidate, c.rival, c.options), c.replaces) << c.what;

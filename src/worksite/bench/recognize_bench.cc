@@ -611,6 +611,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"ownbalance", [o](double v) { o->min_own_balance = static_cast<int>(v); }},
       {"centreslack", [o](double v) { o->support_centre_slack_m = v / 1000; }},
       {"tightfit", [o](double v) { o->support_tight_fit_shift_px = v; }},
+      {"rmsratio", [o](double v) { o->conflict_rms_ratio = v; }},
+      {"scorelead", [o](double v) { o->conflict_score_lead = v; }},
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
@@ -632,7 +634,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "laddercoverage-X, "
            "refitinimage-X, "
            "balance-N, ownlead-N, rankshare-X, withinshare-X, inimagelead-X, tieshare-X, ownbalance-N, "
-           "centreslack-MM, tightfit-PX)";
+           "centreslack-MM, tightfit-PX, rmsratio-X, scorelead-X)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);

@@ -625,6 +625,11 @@ struct PairwiseSide {
   // The other side's box lies within this one's (WithinBox) and its image ends at an occluding
   // contour inside this one's (EndsAtContourInside).
   bool holds_other = false;
+  // The RMS of its matched lines against its pose (px), its evidence score (the one it ranks by) and
+  // its model (index into the library).
+  double rms_px = 0;
+  double score = 0;
+  int model = -1;
 };
 // The selection's pairwise decision: the candidate replaces its rival when its own balance reaches
 // RecognizerOptions::conflict_balance_margin and either the rival's own is at most 3 (nothing of it
@@ -632,7 +637,10 @@ struct PairwiseSide {
 // while the candidate ranks at least conflict_rank_share of the rival (conflict_within_rank_share,
 // when lower, where the candidate holds its rival: PairwiseSide::holds_other); or, where neither own balance
 // reaches the margin (either sign), when a larger share of the candidate's outline is inside the
-// image by conflict_in_image_lead while it ranks at least conflict_tie_rank_share of the rival.
+// image by conflict_in_image_lead while it ranks at least conflict_tie_rank_share of the rival. Where
+// the candidate's own balance reaches the margin, also when it is another model than the rival, its
+// lines fit it closer, their RMS at most conflict_rms_ratio of the rival's, and its evidence score
+// leads by conflict_score_lead.
 bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival,
                    const RecognizerOptions& options);
 // Whether `inner`'s box lies within `outer`'s, each of its vertices within 5 mm of it: a shorter

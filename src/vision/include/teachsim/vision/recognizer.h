@@ -352,6 +352,18 @@ struct RecognizerOptions {
   // session 17).
   double conflict_in_image_lead = 0.1;
   double conflict_tie_rank_share = 0.85;
+  // The same test's fourth way, where the candidate's own outline shows (its balance reaches
+  // conflict_balance_margin) and it is another model: its lines fit it closer than the rival's, their
+  // RMS at most conflict_rms_ratio of the rival's, and its evidence score leads the rival's by
+  // conflict_score_lead or more. A larger wrong model outranks the right one by its length of outline,
+  // shared with the block or lying along its wood grain, but its lines lie off its edges. 0: off.
+  // Chosen on render seeds 7-38 from the traced pairwise tests (at 0.5 and 0.03 it turns 6 of the 25
+  // that a right candidate lost, on 4 blocks, and none of the 4,196 that a wrong one lost; at 0.7 the
+  // same 4 found, one block lost and one false detection more): found 5794 / 280 / 28 ->
+  // 5795 / 283 / 28, false detections 77 -> 73; held out, seeds 39-71: 5822 / 254 / 37 -> 5825 / 254
+  // / 37, 110 -> 107; no block lost (docs/benchmarks.md, session 59).
+  double conflict_rms_ratio = 0.5;
+  double conflict_score_lead = 0.03;
   // Explained away: after the selection, a recognition whose own outline (OwnOutlineBalance against
   // all the other accepted recognitions, fixed edges left out too) shows in the image on balance by
   // fewer than this many samples (2.5 px apart) is dropped, the weakest first: what it predicts the
