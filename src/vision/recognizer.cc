@@ -1588,25 +1588,24 @@ std::vector<size_t> RecognitionPass::Select(const std::vector<ImageLine>* contou
         const Candidate& o = candidates_[accepted[k]];
         others.push_back({&models_.models[static_cast<size_t>(o.model)], o.camera_T_object});
       }
-      PairwiseSide own{OwnOutlineBalance(mc, c.camera_T_object, others, camera_, detection_.edge_map,
-                                         fixed_edges_, options_),
-                       rank_[i],
-                       VisibleOutlineInImage(mc, camera_, c.camera_T_object),
-                       options_.conflict_within_rank_share > 0 && contours != nullptr &&
-                           WithinBox(mc, c.camera_T_object, ma, a.camera_T_object) &&
-                           EndsAtContour(ma, a.camera_T_object, mc, c.camera_T_object, *contours),
-                       c.rms_px,
-                       c.rank_score,
-                       c.model};
+      PairwiseSide own{.own = OwnOutlineBalance(mc, c.camera_T_object, others, camera_, detection_.edge_map,
+                                                fixed_edges_, options_),
+                       .rank = rank_[i],
+                       .in_image = VisibleOutlineInImage(mc, camera_, c.camera_T_object),
+                       .holds_other = options_.conflict_within_rank_share > 0 && contours != nullptr &&
+                                      WithinBox(mc, c.camera_T_object, ma, a.camera_T_object) &&
+                                      EndsAtContour(ma, a.camera_T_object, mc, c.camera_T_object, *contours),
+                       .rms_px = c.rms_px,
+                       .score = c.rank_score,
+                       .model = c.model};
       others.front() = {&mc, c.camera_T_object};
-      PairwiseSide rival{OwnOutlineBalance(ma, a.camera_T_object, others, camera_, detection_.edge_map,
-                                           fixed_edges_, options_),
-                         rank_[accepted[conflicts[0]]],
-                         VisibleOutlineInImage(ma, camera_, a.camera_T_object),
-                         false,
-                         a.rms_px,
-                         a.rank_score,
-                         a.model};
+      PairwiseSide rival{.own = OwnOutlineBalance(ma, a.camera_T_object, others, camera_, detection_.edge_map,
+                                                  fixed_edges_, options_),
+                         .rank = rank_[accepted[conflicts[0]]],
+                         .in_image = VisibleOutlineInImage(ma, camera_, a.camera_T_object),
+                         .rms_px = a.rms_px,
+                         .score = a.rank_score,
+                         .model = a.model};
       if (ReplacesRival(own, rival, options_)) accepted[conflicts[0]] = i;
     }
   }
