@@ -990,6 +990,29 @@ const char* LossStageName(LossStage stage) {
   return "?";
 }
 
+const char* SecondLookName(RecognitionTrace::SecondLook::Verdict verdict) {
+  using Verdict = RecognitionTrace::SecondLook::Verdict;
+  switch (verdict) {
+    case Verdict::kNone:
+      return "none";
+    case Verdict::kOverlaps:
+      return "overlaps";
+    case Verdict::kImplausible:
+      return "implausible";
+    case Verdict::kNothingHides:
+      return "nothing hides";
+    case Verdict::kRules:
+      return "rules";
+    case Verdict::kScore:
+      return "score";
+    case Verdict::kVetoed:
+      return "vetoed";
+    case Verdict::kPassed:
+      return "passed";
+  }
+  return "?";
+}
+
 StageLoss ClassifyLoss(const Model& model, int model_index, const Camera& camera, const geometry::Pose3& camera_T_truth,
                        const LineDetection& detection, const std::vector<Group>& groups,
                        const RecognitionTrace& trace) {
@@ -1061,6 +1084,7 @@ StageLoss ClassifyLoss(const Model& model, int model_index, const Camera& camera
         candidate = true;
       } else if (!candidate) {
         out.verification = std::max(out.verification, f.outcome);
+        if (f.second_look.NearerThan(out.second_look)) out.second_look = f.second_look;
       }
     }
   }
@@ -1681,6 +1705,15 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
                                           : found_contours != nullptr
                                               ? *found_contours
                                               : OccludingContours(detection_, camera_, options_);
+  // With a trace: each pose's judgement nearest to passing (RecognitionTrace::SecondLook).
+  using Second = RecognitionTrace::SecondLook::Verdict;
+  RecognitionTrace::SecondLook judgement;
+  auto note = [&](Second verdict, bool behind_contour, double hidden, Outcome outcome, double score,
+                  double min_score) {
+    if (trace_ == nullptr) return;
+    const RecognitionTrace::SecondLook look{verdict, behind_contour, outcome, hidden, score, min_score};
+    if (look.NearerThan(judgement)) judgement = look;
+  };
   // A pose judged again with `hiding` leaving out part of its outline (`hidden` of its samples in
   // the image): the matched share over the outline in view, without the lines accepted recognitions
   // claim; the rules, and an evidence score of at least `min_score`.
@@ -1689,6 +1722,7 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
   auto judge_hidden = [&](const Rejected& r, const Hiding& hiding, double hidden,
                           std::optional<EdgeMatchSet>* free_matches,
                           double min_score) -> std::optional<Candidate> {
+    const bool behind_contour = hiding.contour != nullptr;
     const Model& model = models_.models[static_cast<size_t>(r.model)];
     const geometry::Pose3& pose = r.fit.camera_T_object;
     if (!*free_matches) {
@@ -1700,13 +1734,20 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
     const double covered = set.matched_fraction * set.visible_length_px;
     set.visible_length_px *= 1 - hidden;
     set.matched_fraction = set.visible_length_px > 0 ? std::min(1.0, covered / set.visible_length_px) : 0;
-    if (!EnoughMatched(model, set, pose)) return std::nullopt;
+    if (!EnoughMatched(model, set, pose)) {
+      note(Second::kRules, behind_contour, hidden, Outcome::kMatchedFraction, 0, min_score);
+      return std::nullopt;
+    }
     const PoseEvidence evidence =
         ComputeEvidence(model, camera_, pose, detection_, &fixed_edges_, options_, set, &hiding);
     double rms_px = 0;
     const Outcome verdict = Judge(evidence, options_, &rms_px);
     const double score = EvidenceScore(evidence);
-    if (verdict != Outcome::kCandidate || score < min_score) return std::nullopt;
+    if (verdict != Outcome::kCandidate || score < min_score) {
+      note(verdict != Outcome::kCandidate ? Second::kRules : Second::kScore, behind_contour, hidden, verdict,
+           score, min_score);
+      return std::nullopt;
+    }
     Candidate c;
     c.trace_index = r.trace_index;
     c.model = r.model;
@@ -1731,7 +1772,18 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
     for (size_t k = 0; k < accepted.size() && !deep; ++k) {
       deep = Interpenetrate(r.model, pose, candidates_[accepted[k]]);
     }
-    if (deep || Implausible(model, pose)) continue;
+    judgement = {};
+    // The judgement into the trace, where there is one.
+    auto trace_it = [&] {
+      if (trace_ != nullptr && r.trace_index >= 0)
+        trace_->fitted[static_cast<size_t>(r.trace_index)].second_look = judgement;
+    };
+    if (deep || Implausible(model, pose)) {
+      note(deep ? Second::kOverlaps : Second::kImplausible, false, 0, Outcome::kFitFailed, 0, 0);
+      trace_it();
+      continue;
+    }
+    note(Second::kNothingHides, false, 0, Outcome::kFitFailed, 0, 0);
     std::optional<EdgeMatchSet> free_matches;
     const ImageExtent extent = image_extent(model, pose);
     in_front.clear();
@@ -1755,6 +1807,10 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
       const double hidden = hidden_outline(hiding).share;
       if (hidden >= options_.occlusion_min_hidden_share && 1 - hidden >= options_.occlusion_min_shown_share) {
         best = judge_hidden(r, hiding, hidden, &free_matches, options_.occlusion_min_evidence_score);
+        if (best) {
+          note(Second::kPassed, false, hidden, Outcome::kCandidate, best->rank_score,
+               options_.occlusion_min_evidence_score);
+        }
       }
     }
     if (!best && !contours.empty() && extent.valid) {
@@ -1781,17 +1837,27 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
         std::optional<Candidate> c = judge_hidden(r, hiding, hidden.share, &free_matches,
                                                   options_.ContourMinEvidenceScore(hidden.coverage));
         // Less than contour_min_shown_share in view: only with the higher evidence score.
+        const double score = c ? c->rank_score : 0;
         if (c && shown < options_.contour_min_shown_share &&
             c->rank_score < options_.contour_low_shown_score) {
           c.reset();
+          note(Second::kVetoed, true, hidden.share, Outcome::kCandidate, score,
+               options_.contour_low_shown_score);
         }
-        if (c && (!best || c->rank_score > best->rank_score) &&
-            !ContinuesPastHiddenEnd(model, camera_, pose, contour, detection_.edge_map, options_) &&
-            !AmbiguousExtent(models_, r.model, pose, contour, K_)) {
-          best = std::move(c);
+        if (c && (!best || c->rank_score > best->rank_score)) {
+          if (!ContinuesPastHiddenEnd(model, camera_, pose, contour, detection_.edge_map, options_) &&
+              !AmbiguousExtent(models_, r.model, pose, contour, K_)) {
+            best = std::move(c);
+            note(Second::kPassed, true, hidden.share, Outcome::kCandidate, score,
+                 options_.ContourMinEvidenceScore(hidden.coverage));
+          } else {
+            note(Second::kVetoed, true, hidden.share, Outcome::kCandidate, score,
+                 options_.ContourMinEvidenceScore(hidden.coverage));
+          }
         }
       }
     }
+    trace_it();
     if (!best) continue;
     passed.push_back(candidates_.size());
     rank_.push_back(NetSupportPx(best->evidence) * best->rank_score);

@@ -1704,6 +1704,75 @@ TEST(OcclusionTest, ABarWhoseMiddleAnUnknownPoleHidesIsFoundBesideItsContours) {
   EXPECT_EQ(result->objects.size(), 0u);
 }
 
+// The trace keeps the occlusion pass's second look at each pose verification turned down, and
+// ClassifyLoss the one nearest to passing of a block lost at verification: the bar whose middle the
+// pole hides passes the pass by default; asked for a score no pose reaches where less than half is
+// in view, it is vetoed there, behind a contour, more than half hidden; asked for that score
+// everywhere behind contours, it fails the score.
+TEST(OcclusionTest, TheTraceKeepsTheOcclusionPassesSecondLook) {
+  const Camera camera = SyntheticCamera();
+  const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0, 0, 0.86);
+  cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar_pose}}, 7);
+  const auto [lo, hi] = ImageXSpan(camera, Bar(), bar_pose);
+  const double centre = camera.Project(bar_pose.translation)->x(), half = (hi - lo) / 3.5;
+  DrawPole(&image, centre - half, centre + half);
+  const geometry::Pose3 camera_T_bar = camera.camera_T_world() * bar_pose;
+  using Verdict = RecognitionTrace::SecondLook::Verdict;
+  struct Case {
+    const char* what;
+    double low_shown_score, bare_score, min_score;
+    Verdict verdict;
+  };
+  const RecognizerOptions defaults;
+  for (const Case& c :
+       {Case{"defaults", defaults.contour_low_shown_score, defaults.contour_bare_min_evidence_score,
+             defaults.occlusion_min_evidence_score, Verdict::kPassed},
+        Case{"low share asks 1", 1, defaults.contour_bare_min_evidence_score,
+             defaults.occlusion_min_evidence_score, Verdict::kVetoed},
+        Case{"every hiding asks 1", 1, 1, 1, Verdict::kScore}}) {
+    RecognizerOptions options = SmallIndexOptions();
+    options.contour_low_shown_score = c.low_shown_score;
+    options.contour_bare_min_evidence_score = c.bare_score;
+    options.occlusion_min_evidence_score = c.min_score;
+    RecognitionTrace trace;
+    auto result = RecognizeCubesAndBars(image, options, &trace);
+    ASSERT_TRUE(result.ok()) << result.status().message();
+    ASSERT_EQ(result->objects.size(), c.verdict == Verdict::kPassed ? 1u : 0u) << c.what;
+    // The fits of the bar near its pose that verification turned down: their best second look.
+    RecognitionTrace::SecondLook best;
+    for (const RecognitionTrace::Fitted& f : trace.fitted) {
+      if (f.model == 1 && f.outcome != RecognitionTrace::Outcome::kCandidate &&
+          (f.camera_T_object.translation - camera_T_bar.translation).norm() < 0.003 &&
+          f.second_look.NearerThan(best)) {
+        best = f.second_look;
+      }
+    }
+    EXPECT_EQ(best.verdict, c.verdict) << c.what << ": " << SecondLookName(best.verdict);
+    EXPECT_TRUE(best.behind_contour) << c.what;
+    EXPECT_GT(best.hidden, 0.5) << c.what;
+    EXPECT_GT(best.score, 0.9) << c.what;
+    if (c.verdict == Verdict::kPassed) continue;
+    EXPECT_EQ(best.min_score, 1) << c.what;
+    const LineDetection detection = DetectLinesAndEdges(image, camera, options);
+    const StageLoss loss =
+        ClassifyLoss(Bar(), 1, camera, camera_T_bar, detection, FindGroups(detection.lines, options), trace);
+    EXPECT_EQ(loss.stage, LossStage::kVerification) << c.what;
+    EXPECT_EQ(loss.second_look.verdict, c.verdict) << c.what;
+    EXPECT_EQ(loss.second_look.score, best.score) << c.what;
+  }
+  // Nearer to passing: a later verdict, or the same one with a higher score.
+  RecognitionTrace::SecondLook nothing{Verdict::kNothingHides};
+  EXPECT_TRUE(nothing.NearerThan(RecognitionTrace::SecondLook{Verdict::kOverlaps}));
+  EXPECT_FALSE(nothing.NearerThan(RecognitionTrace::SecondLook{Verdict::kRules}));
+  RecognitionTrace::SecondLook low{
+      Verdict::kScore, true, RecognitionTrace::Outcome::kCandidate, 0.5, 0.8, 0.93};
+  RecognitionTrace::SecondLook high = low;
+  high.score = 0.9;
+  EXPECT_TRUE(high.NearerThan(low));
+  EXPECT_FALSE(low.NearerThan(high));
+  EXPECT_FALSE(low.NearerThan(low));
+}
+
 // The same bar behind a wider pole, 0.68 of the bar's image: less than 0.4 of its outline in view.
 // Found at its pose with the default contour_low_shown_share (0.35), not with 0.4.
 TEST(OcclusionTest, ABarWithLessThanFourTenthsOfItsOutlineBesideAPoleIsFoundDownToTheLowShare) {

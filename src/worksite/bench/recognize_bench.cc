@@ -695,6 +695,8 @@ struct DataSetResult {
   int bins[3] = {0, 0, 0};
   int losses[3][vision::kLossStages] = {};  // teachsim: per bin, objects by the stage that lost them
   int losses_found[3][vision::kLossStages] = {};  // ... of them those the evaluation counts as found
+  // teachsim: per bin, the objects missed at verification by the occlusion pass's second look
+  int second_looks[3][vision::kSecondLookVerdicts] = {};
   // teachsim's false positives by where they stand (vision::FalsePositiveHosts): at a missed block, by
   // the stage that lost it; at a found block; at a block too little visible to be scored; at none.
   int false_at_missed[vision::kLossStages] = {};
@@ -967,6 +969,8 @@ int Run(const BenchArgs& args) {
           }
           if (was_found) ++result.losses_found[bin][static_cast<int>(loss.stage)];
           outcome_of[i] = was_found ? -2 : static_cast<int>(loss.stage);
+          if (!was_found && loss.stage == vision::LossStage::kVerification)
+            ++result.second_looks[bin][static_cast<int>(loss.second_look.verdict)];
           if (std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr && !was_found) {
             auto p = camera->Project(t.world_T_object.translation);
             std::fprintf(stderr,
@@ -976,6 +980,17 @@ int Run(const BenchArgs& args) {
                          vision::LossStageName(loss.stage), loss.edges_with_lines, loss.visible_edges,
                          static_cast<int>(loss.verification), loss.extent_px, loss.best_start_px, loss.best_end_px);
             for (double d : loss.best_start_rounds_px) std::fprintf(stderr, "    round: %.1f px\n", d);
+            if (loss.stage == vision::LossStage::kVerification) {
+              // Where the pass judged the part in view: behind what, and its verdict there.
+              const vision::RecognitionTrace::SecondLook& look = loss.second_look;
+              std::fprintf(stderr, "    occlusion pass: %s", vision::SecondLookName(look.verdict));
+              if (look.verdict >= vision::RecognitionTrace::SecondLook::Verdict::kRules) {
+                std::fprintf(stderr, " (behind %s, %.0f %% hidden; outcome %d, score %.3f of %.3f asked)",
+                             look.behind_contour ? "a contour" : "recognitions", 100 * look.hidden,
+                             static_cast<int>(look.outcome), look.score, look.min_score);
+              }
+              std::fprintf(stderr, "\n");
+            }
             const vision::PoseEvidence at_truth =
                 vision::EvaluatePose(library.models[static_cast<std::size_t>(model_index)], *camera,
                                      camera->camera_T_world() * t.world_T_object, detection, recognizer->options());
@@ -1173,6 +1188,16 @@ int Run(const BenchArgs& args) {
       }
       losses[vision::BinName(static_cast<vision::VisibilityBin>(b))] = per_stage;
     }
+    // The blocks lost at verification by the occlusion pass's second look (SecondLook::Verdict).
+    json::Json second_looks = json::Json::object();
+    for (int b = 0; b < 3; ++b) {
+      json::Json per_verdict = json::Json::object();
+      for (int v = 0; v < vision::kSecondLookVerdicts; ++v) {
+        per_verdict[vision::SecondLookName(static_cast<vision::RecognitionTrace::SecondLook::Verdict>(v))] =
+            results[s].second_looks[b][v];
+      }
+      second_looks[vision::BinName(static_cast<vision::VisibilityBin>(b))] = per_verdict;
+    }
     json::Json at_missed = json::Json::object();
     int missed_total = 0;
     for (int k = 0; k < vision::kLossStages; ++k) {
@@ -1183,6 +1208,7 @@ int Run(const BenchArgs& args) {
     data_sets.push_back(
         {{"name", sets[s].name},
          {"teachsim_losses", losses},
+         {"teachsim_verification_losses", second_looks},
          {"teachsim_false_positives",
           {{"at_missed_block", at_missed},
            {"at_found_block", results[s].false_at_found},
@@ -1339,6 +1365,13 @@ int Run(const BenchArgs& args) {
       for (const auto& [stage, n] : set["teachsim_losses"][bin].items()) {
         std::printf("  %s %d (%d)", stage.c_str(), n["objects"].get<int>(), n["found"].get<int>());
       }
+      std::printf("\n");
+    }
+    std::printf("  teachsim: objects lost at verification by the occlusion pass's second look, per bin\n");
+    for (const char* bin : {">=0.7", "0.4-0.7", "<0.4"}) {
+      std::printf("    %-8s", bin);
+      for (const auto& [verdict, n] : set["teachsim_verification_losses"][bin].items())
+        std::printf("  %s %d", verdict.c_str(), n.get<int>());
       std::printf("\n");
     }
     const json::Json& fp = set["teachsim_false_positives"];

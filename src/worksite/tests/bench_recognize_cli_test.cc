@@ -106,6 +106,22 @@ TEST_F(BenchRecognizeCliTest, SeveralRenderSeedsArePooledIntoOneDataSet) {
   EXPECT_EQ(set["teachsim_false_positives"]["elsewhere"].get<int>(),
             a["teachsim_false_positives"]["elsewhere"].get<int>() +
                 b["teachsim_false_positives"]["elsewhere"].get<int>());
+  // The blocks missed at verification by the occlusion pass's second look account for every one of
+  // them, pooled as the rest.
+  for (const char* bin : {">=0.7", "0.4-0.7", "<0.4"}) {
+    for (const json::Json* s : {&set, &a, &b}) {
+      int looks = 0;
+      for (const auto& [verdict, n] : (*s)["teachsim_verification_losses"][bin].items())
+        looks += n.get<int>();
+      const json::Json& lost = (*s)["teachsim_losses"][bin]["verification"];
+      EXPECT_EQ(looks, lost["objects"].get<int>() - lost["found"].get<int>()) << bin;
+    }
+    for (const auto& [verdict, n] : set["teachsim_verification_losses"][bin].items()) {
+      EXPECT_EQ(n.get<int>(), a["teachsim_verification_losses"][bin][verdict].get<int>() +
+                                  b["teachsim_verification_losses"][bin][verdict].get<int>())
+          << bin << " " << verdict;
+    }
+  }
   // Where the time went: every image's stages, and the slowest image named with its seed and its
   // counts (which of the pooled images it was; the times themselves differ from run to run).
   EXPECT_LE(m["images_over_time_goal"].get<int>(), 6);

@@ -698,6 +698,8 @@ enum class LossStage : uint8_t {
 };
 inline constexpr int kLossStages = 7;
 const char* LossStageName(LossStage stage);
+inline constexpr int kSecondLookVerdicts = 8;
+const char* SecondLookName(RecognitionTrace::SecondLook::Verdict verdict);
 struct StageLoss {
   LossStage stage = LossStage::kSegments;
   int visible_edges = 0, edges_with_lines = 0;
@@ -705,6 +707,9 @@ struct StageLoss {
   double best_start_px = 1e9, best_end_px = 1e9;  // the fitted hypotheses' closest start and end
   std::vector<double> best_start_rounds_px;       // the closest start's distance after each fit round
   RecognitionTrace::Outcome verification = RecognitionTrace::Outcome::kFitFailed;  // for kVerification
+  // For kVerification: the occlusion pass's second look nearest to passing among the fits that
+  // converged onto it (why the pass did not take the block either).
+  RecognitionTrace::SecondLook second_look;
 };
 // camera_T_truth: the true pose; model_index: its model in the recognizer's library; trace from
 // Recognize on the same image with the same options.

@@ -460,6 +460,34 @@ struct RecognitionTrace {
     kImplausible,      // outside the work area, under the table or inside a fixed object
     kCandidate,        // passed; then kept or dropped by the selection below
   };
+  // The occlusion pass's second look at a pose verification turned down
+  // (RecognizerOptions::occlusion_reverify): its judgement nearest to passing over what may hide
+  // part of the pose.
+  struct SecondLook {
+    enum class Verdict : uint8_t {
+      kNone,          // not looked at again: it passed verification, the fit failed, or the pass is off
+      kOverlaps,      // it interpenetrates an accepted recognition (another fit of a block found)
+      kImplausible,   // culled (outside the work area, under the table, inside a fixed object)
+      kNothingHides,  // no accepted recognition in front and no occluding contour across it hides
+                      // enough of it, leaves enough in view and has little support behind it
+      kRules,         // judged on the part in view: too little matched, or `outcome`
+      kScore,         // passed the rules there; evidence score under what the pass asks
+      kVetoed,        // passed, but less than contour_min_shown_share in view without
+                      // contour_low_shown_score, or it runs on past the contour, or another
+                      // model laid from the part in view would end hidden too
+      kPassed,        // joined the candidates (the selection after the pass decides)
+    };
+    Verdict verdict = Verdict::kNone;
+    bool behind_contour = false;            // hidden by a contour (else by recognitions in front)
+    Outcome outcome = Outcome::kFitFailed;  // the verdict on the part in view (kRules and after)
+    double hidden = 0;                      // share of the outline hidden
+    double score = 0;                       // evidence score on the part in view (kScore and after)
+    double min_score = 0;                   // the score the pass asked there
+    // Nearer to passing than `other`: a later verdict, or the same with a higher score.
+    bool NearerThan(const SecondLook& other) const {
+      return verdict != other.verdict ? verdict > other.verdict : score > other.score;
+    }
+  };
   struct Fitted {
     int model = 0;                             // index into the library
     int group_kind = 0;  // GroupKind, kSupportKind or kAlternativeKind (recognition_stages.h)
@@ -469,6 +497,7 @@ struct RecognitionTrace {
     Outcome outcome = Outcome::kFitFailed;
     bool accepted = false;  // among the final recognitions (also a pose verification turned down
                             // that the occlusion pass accepted: its outcome stays the first verdict)
+    SecondLook second_look;  // the occlusion pass's, of a pose verification turned down
   };
   int lines = 0, groups = 0, hypotheses = 0;
   int corners = 0, support_hypotheses = 0;  // the support-plane source's corners and kept hypotheses
