@@ -1666,17 +1666,23 @@ void ExpectFoundOnlyWith(const cv::Mat& image, const std::function<void(Recogniz
   }
 }
 
+// The bar at `bar_pose` with a dark pole over its centre, as wide as 4/7 of the bar's image.
+cv::Mat BarWithItsMiddleBehindAPole(const geometry::Pose3& bar_pose) {
+  const Camera camera = SyntheticCamera();
+  cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar_pose}}, 7);
+  const auto [lo, hi] = ImageXSpan(camera, Bar(), bar_pose);
+  const double centre = camera.Project(bar_pose.translation)->x(), half = (hi - lo) / 3.5;
+  DrawPole(&image, centre - half, centre + half);
+  return image;
+}
+
 // A bar whose middle something outside the library hides (a dark pole in front, the whole height of
 // the image): judged on the outline in view beside the pole's two contours
 // (RecognizerOptions::occlusion_contours), it is found at its pose; without them nothing is found.
 TEST(OcclusionTest, ABarWhoseMiddleAnUnknownPoleHidesIsFoundBesideItsContours) {
   const Camera camera = SyntheticCamera();
   const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0, 0, 0.86);
-  cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar_pose}}, 7);
-  // The pole over the bar's centre, as wide as 4/7 of the bar's image.
-  const auto [lo, hi] = ImageXSpan(camera, Bar(), bar_pose);
-  const double centre = camera.Project(bar_pose.translation)->x(), half = (hi - lo) / 3.5;
-  DrawPole(&image, centre - half, centre + half);
+  const cv::Mat image = BarWithItsMiddleBehindAPole(bar_pose);
   // More than half the outline is hidden: judged by the rule for less than contour_min_shown_share
   // in view (RecognizerOptions::contour_low_shown_share), on these clean edges with an evidence score
   // above its contour_low_shown_score.
@@ -1712,10 +1718,7 @@ TEST(OcclusionTest, ABarWhoseMiddleAnUnknownPoleHidesIsFoundBesideItsContours) {
 TEST(OcclusionTest, TheTraceKeepsTheOcclusionPassesSecondLook) {
   const Camera camera = SyntheticCamera();
   const geometry::Pose3 bar_pose = OnTable(Bar().box_size_m, 0, 0, 0.86);
-  cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar_pose}}, 7);
-  const auto [lo, hi] = ImageXSpan(camera, Bar(), bar_pose);
-  const double centre = camera.Project(bar_pose.translation)->x(), half = (hi - lo) / 3.5;
-  DrawPole(&image, centre - half, centre + half);
+  const cv::Mat image = BarWithItsMiddleBehindAPole(bar_pose);
   const geometry::Pose3 camera_T_bar = camera.camera_T_world() * bar_pose;
   using Verdict = RecognitionTrace::SecondLook::Verdict;
   struct Case {
