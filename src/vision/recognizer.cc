@@ -992,6 +992,7 @@ const char* LossStageName(LossStage stage) {
 
 const char* SecondLookName(RecognitionTrace::SecondLook::Verdict verdict) {
   using Verdict = RecognitionTrace::SecondLook::Verdict;
+  static_assert(static_cast<int>(Verdict::kPassed) + 1 == kSecondLookVerdicts, "a verdict without its count");
   switch (verdict) {
     case Verdict::kNone:
       return "none";

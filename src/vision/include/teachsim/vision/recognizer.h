@@ -465,7 +465,8 @@ struct RecognitionTrace {
   // part of the pose.
   struct SecondLook {
     enum class Verdict : uint8_t {
-      kNone,          // not looked at again: it passed verification, the fit failed, or the pass is off
+      kNone,          // not looked at again: it passed verification, was culled there, its fit
+                      // failed, or the pass is off
       kOverlaps,      // it interpenetrates an accepted recognition (another fit of a block found)
       kImplausible,   // culled (outside the work area, under the table, inside a fixed object)
       kNothingHides,  // no accepted recognition in front and no occluding contour across it hides
