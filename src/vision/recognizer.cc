@@ -1835,8 +1835,8 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
             hidden.coverage > options_.contour_max_hidden_coverage) {
           continue;
         }
-        std::optional<Candidate> c = judge_hidden(r, hiding, hidden.share, &free_matches,
-                                                  options_.ContourMinEvidenceScore(hidden.coverage));
+        const double asked = options_.ContourMinEvidenceScore(hidden.coverage);
+        std::optional<Candidate> c = judge_hidden(r, hiding, hidden.share, &free_matches, asked);
         // Less than contour_min_shown_share in view: only with the higher evidence score.
         const double score = c ? c->rank_score : 0;
         if (c && shown < options_.contour_min_shown_share &&
@@ -1849,11 +1849,9 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
           if (!ContinuesPastHiddenEnd(model, camera_, pose, contour, detection_.edge_map, options_) &&
               !AmbiguousExtent(models_, r.model, pose, contour, K_)) {
             best = std::move(c);
-            note(Second::kPassed, true, hidden.share, Outcome::kCandidate, score,
-                 options_.ContourMinEvidenceScore(hidden.coverage));
+            note(Second::kPassed, true, hidden.share, Outcome::kCandidate, score, asked);
           } else {
-            note(Second::kVetoed, true, hidden.share, Outcome::kCandidate, score,
-                 options_.ContourMinEvidenceScore(hidden.coverage));
+            note(Second::kVetoed, true, hidden.share, Outcome::kCandidate, score, asked);
           }
         }
       }
