@@ -1776,8 +1776,9 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
     judgement = {};
     // The judgement into the trace, where there is one.
     auto trace_it = [&] {
-      if (trace_ != nullptr && r.trace_index >= 0)
-        trace_->fitted[static_cast<size_t>(r.trace_index)].second_look = judgement;
+      if (trace_ == nullptr || r.trace_index < 0) return;
+      judgement.outside_image = 1 - VisibleOutlineInImage(model, camera_, pose);
+      trace_->fitted[static_cast<size_t>(r.trace_index)].second_look = judgement;
     };
     if (deep || Implausible(model, pose)) {
       note(deep ? Second::kOverlaps : Second::kImplausible, false, 0, Outcome::kFitFailed, 0, 0);

@@ -1753,6 +1753,7 @@ TEST(OcclusionTest, TheTraceKeepsTheOcclusionPassesSecondLook) {
     EXPECT_EQ(best.verdict, c.verdict) << c.what << ": " << SecondLookName(best.verdict);
     EXPECT_TRUE(best.behind_contour) << c.what;
     EXPECT_GT(best.hidden, 0.5) << c.what;
+    EXPECT_EQ(best.outside_image, 0) << c.what;  // the pole hides it, not the image border
     EXPECT_GT(best.score, 0.9) << c.what;
     if (c.verdict == Verdict::kPassed) continue;
     EXPECT_EQ(best.min_score, 1) << c.what;
@@ -1774,6 +1775,43 @@ TEST(OcclusionTest, TheTraceKeepsTheOcclusionPassesSecondLook) {
   EXPECT_TRUE(high.NearerThan(low));
   EXPECT_FALSE(low.NearerThan(high));
   EXPECT_FALSE(low.NearerThan(low));
+}
+
+// The second look says how much of a pose the image border cuts off: a bar whose outline lies 0.6
+// inside the image, turned down wherever verification or the pass asks an evidence score of 1, is
+// looked at again with nothing to hide it, and each of its fits notes the share of its outline
+// outside the image (the bar's own about 0.4).
+TEST(OcclusionTest, TheSecondLookNotesTheShareOfThePoseOutsideTheImage) {
+  const Camera camera = SyntheticCamera();
+  const Model bar = Bar();
+  geometry::Pose3 bar_pose = OnTable(bar.box_size_m, 0.02, -0.01, 0.4);
+  while (VisibleOutlineInImage(bar, camera, camera.camera_T_world() * bar_pose) > 0.6) {
+    bar_pose.translation += Eigen::Vector3d(-0.001, -0.001, 0);  // towards the image's left
+  }
+  const cv::Mat image = RenderBoxes(camera, {{bar.box_size_m, bar_pose}}, 13);
+  RecognizerOptions options = SmallIndexOptions();
+  options.min_evidence_score = options.accept_evidence_score = 1;
+  options.matched_share_rescue_score = options.refit_accept_score = 1;
+  options.occlusion_min_evidence_score = options.contour_bare_min_evidence_score = 1;
+  RecognitionTrace trace;
+  auto result = RecognizeCubesAndBars(image, options, &trace);
+  ASSERT_TRUE(result.ok()) << result.status().message();
+  EXPECT_EQ(result->objects.size(), 0u);
+  const geometry::Pose3 camera_T_bar = camera.camera_T_world() * bar_pose;
+  int looked_at = 0, at_the_bar = 0;
+  for (const RecognitionTrace::Fitted& f : trace.fitted) {
+    if (f.second_look.verdict == RecognitionTrace::SecondLook::Verdict::kNone) continue;
+    ++looked_at;
+    const Model& fitted = f.model == 1 ? bar : Cube();
+    EXPECT_DOUBLE_EQ(f.second_look.outside_image,
+                     1 - VisibleOutlineInImage(fitted, camera, f.camera_T_object));
+    if (f.model != 1 || (f.camera_T_object.translation - camera_T_bar.translation).norm() > 0.003) continue;
+    ++at_the_bar;
+    EXPECT_EQ(f.second_look.verdict, RecognitionTrace::SecondLook::Verdict::kNothingHides);
+    EXPECT_NEAR(f.second_look.outside_image, 0.4, 0.07);
+  }
+  EXPECT_GT(looked_at, 0);
+  EXPECT_GT(at_the_bar, 0);
 }
 
 // The same bar behind a wider pole, 0.68 of the bar's image: less than 0.4 of its outline in view.

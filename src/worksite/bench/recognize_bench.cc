@@ -686,6 +686,10 @@ Result<RecognizeArgs> ParseRecognizeArgs(const std::vector<std::string>& extra) 
 const char* const kMethods[] = {"teachsim", "teachsim_raw_pose", "linemod", "linemod_fit"};
 constexpr int kMethodCount = 4;
 constexpr int kFirstPeer = 2;  // the methods from here on are the peer's
+// A block lost at verification counts as cut by the image border when this share of its visible
+// outline or more lies outside the image (SecondLook::outside_image; the share the occlusion pass
+// asks hidden, RecognizerOptions::occlusion_min_hidden_share).
+constexpr double kBorderCutShare = 0.1;
 
 struct DataSetResult {
   vision::SummaryBuilder builders[kMethodCount];
@@ -697,6 +701,8 @@ struct DataSetResult {
   int losses_found[3][vision::kLossStages] = {};  // ... of them those the evaluation counts as found
   // teachsim: per bin, the objects missed at verification by the occlusion pass's second look
   int second_looks[3][vision::kSecondLookVerdicts] = {};
+  // ... of them those cut by the image border (kBorderCutShare of the outline or more outside it)
+  int second_looks_at_border[3][vision::kSecondLookVerdicts] = {};
   // teachsim's false positives by where they stand (vision::FalsePositiveHosts): at a missed block, by
   // the stage that lost it; at a found block; at a block too little visible to be scored; at none.
   int false_at_missed[vision::kLossStages] = {};
@@ -969,8 +975,12 @@ int Run(const BenchArgs& args) {
           }
           if (was_found) ++result.losses_found[bin][static_cast<int>(loss.stage)];
           outcome_of[i] = was_found ? -2 : static_cast<int>(loss.stage);
-          if (!was_found && loss.stage == vision::LossStage::kVerification)
-            ++result.second_looks[bin][static_cast<int>(loss.second_look.verdict)];
+          if (!was_found && loss.stage == vision::LossStage::kVerification) {
+            const int verdict = static_cast<int>(loss.second_look.verdict);
+            ++result.second_looks[bin][verdict];
+            if (loss.second_look.outside_image >= kBorderCutShare)
+              ++result.second_looks_at_border[bin][verdict];
+          }
           if (std::getenv("TEACHSIM_RECOGNIZE_DEBUG") != nullptr && !was_found) {
             auto p = camera->Project(t.world_T_object.translation);
             std::fprintf(stderr,
@@ -989,6 +999,8 @@ int Run(const BenchArgs& args) {
                              look.behind_contour ? "a contour" : "recognitions", 100 * look.hidden,
                              static_cast<int>(look.outcome), look.score, look.min_score);
               }
+              if (look.outside_image > 0)
+                std::fprintf(stderr, "; %.0f %% outside the image", 100 * look.outside_image);
               std::fprintf(stderr, "\n");
             }
             const vision::PoseEvidence at_truth =
@@ -1189,15 +1201,21 @@ int Run(const BenchArgs& args) {
       losses[vision::BinName(static_cast<vision::VisibilityBin>(b))] = per_stage;
     }
     // The blocks lost at verification by the occlusion pass's second look (SecondLook::Verdict).
-    json::Json second_looks = json::Json::object();
-    for (int b = 0; b < 3; ++b) {
-      json::Json per_verdict = json::Json::object();
-      for (int v = 0; v < vision::kSecondLookVerdicts; ++v) {
-        per_verdict[vision::SecondLookName(static_cast<vision::RecognitionTrace::SecondLook::Verdict>(v))] =
-            results[s].second_looks[b][v];
+    // And of them, those cut by the image border.
+    auto per_bin_and_verdict = [](const int(&counts)[3][vision::kSecondLookVerdicts]) {
+      json::Json per_bin = json::Json::object();
+      for (int b = 0; b < 3; ++b) {
+        json::Json per_verdict = json::Json::object();
+        for (int v = 0; v < vision::kSecondLookVerdicts; ++v) {
+          per_verdict[vision::SecondLookName(static_cast<vision::RecognitionTrace::SecondLook::Verdict>(v))] =
+              counts[b][v];
+        }
+        per_bin[vision::BinName(static_cast<vision::VisibilityBin>(b))] = per_verdict;
       }
-      second_looks[vision::BinName(static_cast<vision::VisibilityBin>(b))] = per_verdict;
-    }
+      return per_bin;
+    };
+    const json::Json second_looks = per_bin_and_verdict(results[s].second_looks);
+    const json::Json second_looks_at_border = per_bin_and_verdict(results[s].second_looks_at_border);
     json::Json at_missed = json::Json::object();
     int missed_total = 0;
     for (int k = 0; k < vision::kLossStages; ++k) {
@@ -1209,6 +1227,7 @@ int Run(const BenchArgs& args) {
         {{"name", sets[s].name},
          {"teachsim_losses", losses},
          {"teachsim_verification_losses", second_looks},
+         {"teachsim_verification_losses_at_border", second_looks_at_border},
          {"teachsim_false_positives",
           {{"at_missed_block", at_missed},
            {"at_found_block", results[s].false_at_found},
@@ -1367,11 +1386,15 @@ int Run(const BenchArgs& args) {
       }
       std::printf("\n");
     }
-    std::printf("  teachsim: objects lost at verification by the occlusion pass's second look, per bin\n");
+    std::printf(
+        "  teachsim: objects lost at verification by the occlusion pass's second look (of them cut by the "
+        "image border), per bin\n");
     for (const char* bin : {">=0.7", "0.4-0.7", "<0.4"}) {
       std::printf("    %-8s", bin);
-      for (const auto& [verdict, n] : set["teachsim_verification_losses"][bin].items())
-        std::printf("  %s %d", verdict.c_str(), n.get<int>());
+      for (const auto& [verdict, n] : set["teachsim_verification_losses"][bin].items()) {
+        std::printf("  %s %d (%d)", verdict.c_str(), n.get<int>(),
+                    set["teachsim_verification_losses_at_border"][bin][verdict].get<int>());
+      }
       std::printf("\n");
     }
     const json::Json& fp = set["teachsim_false_positives"];

@@ -121,6 +121,19 @@ TEST_F(BenchRecognizeCliTest, SeveralRenderSeedsArePooledIntoOneDataSet) {
                                   b["teachsim_verification_losses"][bin][verdict].get<int>())
           << bin << " " << verdict;
     }
+    // Of them, those cut by the image border: per verdict, no more than it has, pooled the same way.
+    for (const json::Json* s : {&set, &a, &b}) {
+      for (const auto& [verdict, n] : (*s)["teachsim_verification_losses_at_border"][bin].items()) {
+        EXPECT_GE(n.get<int>(), 0) << bin << " " << verdict;
+        EXPECT_LE(n.get<int>(), (*s)["teachsim_verification_losses"][bin][verdict].get<int>())
+            << bin << " " << verdict;
+      }
+    }
+    for (const auto& [verdict, n] : set["teachsim_verification_losses_at_border"][bin].items()) {
+      EXPECT_EQ(n.get<int>(), a["teachsim_verification_losses_at_border"][bin][verdict].get<int>() +
+                                  b["teachsim_verification_losses_at_border"][bin][verdict].get<int>())
+          << bin << " " << verdict;
+    }
   }
   // Where the time went: every image's stages, and the slowest image named with its seed and its
   // counts (which of the pooled images it was; the times themselves differ from run to run).

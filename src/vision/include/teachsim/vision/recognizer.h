@@ -484,6 +484,9 @@ struct RecognitionTrace {
     double hidden = 0;                      // share of the outline hidden
     double score = 0;                       // evidence score on the part in view (kScore and after)
     double min_score = 0;                   // the score the pass asked there
+    // The share of the pose's visible outline outside the image (VisibleOutlineInImage): what the
+    // image border cuts off, set for every pose the pass looked at again whatever the verdict.
+    double outside_image = 0;
     // Nearer to passing than `other`: a later verdict, or the same with a higher score.
     bool NearerThan(const SecondLook& other) const {
       return verdict != other.verdict ? verdict > other.verdict : score > other.score;
