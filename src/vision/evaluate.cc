@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <filesystem>
+#include <opencv2/imgproc.hpp>
 
 #include "teachsim/vision/recognition_stages.h"
 
@@ -355,6 +356,84 @@ Result<std::vector<int>> FalsePositiveHosts(const std::vector<TruthObject>& trut
     }
   }
   return hosts;
+}
+
+Result<std::vector<std::string>> ShorterModelsInView(
+    const std::map<std::string, Eigen::Vector3d>& model_sizes_m, const std::string& model,
+    const geometry::Pose3& world_T_object, const Camera& camera,
+    const std::vector<Eigen::Vector2d>& visible_px, double margin_px) {
+  const auto it = model_sizes_m.find(model);
+  if (it == model_sizes_m.end()) return Status::InvalidInput("model \"" + model + "\" has no box size");
+  const Eigen::Vector3d& size = it->second;
+  std::vector<std::string> out;
+  if (visible_px.empty()) return out;
+  // The pixels in view, lens distortion removed (a pixel the lens model cannot undo is left out).
+  std::vector<cv::Point2f> pinhole;
+  pinhole.reserve(visible_px.size());
+  for (const Eigen::Vector2d& p : visible_px) {
+    if (const std::optional<Eigen::Vector2d> u = camera.UndistortPixel(p)) {
+      pinhole.emplace_back(static_cast<float>(u->x()), static_cast<float>(u->y()));
+    }
+  }
+  if (pinhole.empty()) return out;
+  const Eigen::Matrix3d K = camera.K();
+  const geometry::Pose3 camera_T_object = camera.camera_T_world() * world_T_object;
+  constexpr double kSameM = 1e-6;
+  std::vector<std::pair<double, std::string>> found;  // (length, model)
+  for (const auto& [name, other] : model_sizes_m) {
+    bool explains = false;
+    // Cut along the block's axis k: the other two sides must match two of the other model's, whose
+    // third side is shorter.
+    for (int k = 0; k < 3 && !explains; ++k) {
+      const double a1 = size[(k + 1) % 3], a2 = size[(k + 2) % 3];
+      for (int m = 0; m < 3 && !explains; ++m) {
+        const double b1 = other[(m + 1) % 3], b2 = other[(m + 2) % 3], length = other[m];
+        const bool same_section = (std::abs(a1 - b1) <= kSameM && std::abs(a2 - b2) <= kSameM) ||
+                                  (std::abs(a1 - b2) <= kSameM && std::abs(a2 - b1) <= kSameM);
+        if (!same_section || !(length < size[k] - kSameM)) continue;
+        for (const double end : {-1.0, 1.0}) {
+          // The shorter box, in the block's frame: flush with the end at `end` * size[k] / 2.
+          Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+          centre[k] = end * 0.5 * (size[k] - length);
+          Eigen::Vector3d half = 0.5 * size;
+          half[k] = 0.5 * length;
+          std::vector<cv::Point2f> corners;
+          bool in_front = true;
+          for (int v = 0; v < 8; ++v) {
+            const Eigen::Vector3d local =
+                centre + Eigen::Vector3d((v & 1) ? half.x() : -half.x(), (v & 2) ? half.y() : -half.y(),
+                                         (v & 4) ? half.z() : -half.z());
+            const Eigen::Vector3d p = camera_T_object * local;
+            if (!(p.z() > 1e-6)) {
+              in_front = false;
+              break;
+            }
+            const Eigen::Vector2d px = (K * p).hnormalized();
+            corners.emplace_back(static_cast<float>(px.x()), static_cast<float>(px.y()));
+          }
+          if (!in_front) return std::vector<std::string>{};
+          std::vector<cv::Point2f> hull;
+          cv::convexHull(corners, hull);
+          bool all_inside = true;
+          for (const cv::Point2f& p : pinhole) {
+            // Signed distance: positive inside, negative outside.
+            if (cv::pointPolygonTest(hull, p, true) < -margin_px) {
+              all_inside = false;
+              break;
+            }
+          }
+          if (all_inside) {
+            explains = true;
+            found.emplace_back(length, name);
+            break;
+          }
+        }
+      }
+    }
+  }
+  std::sort(found.begin(), found.end());
+  for (auto& [length, name] : found) out.push_back(std::move(name));
+  return out;
 }
 
 Stats Summarize(std::vector<double> values) {

@@ -602,6 +602,18 @@ RenderResult Renderer::Render(const std::vector<RenderObject>& objects, std::uin
   return result;
 }
 
+std::vector<std::vector<Eigen::Vector2d>> PixelsInView(const RenderResult& result) {
+  std::vector<std::vector<Eigen::Vector2d>> out(result.objects.size());
+  for (int v = 0; v < result.labels.rows; ++v) {
+    const std::int16_t* row = result.labels.ptr<std::int16_t>(v);
+    for (int u = 0; u < result.labels.cols; ++u) {
+      if (row[u] >= 0 && static_cast<std::size_t>(row[u]) < out.size())
+        out[static_cast<std::size_t>(row[u])].emplace_back(u, v);
+    }
+  }
+  return out;
+}
+
 std::vector<RenderObject> ObjectsFromScene(const scene::Scene& scene) {
   std::vector<RenderObject> out;
   for (const scene::SceneObject& o : scene.objects) {

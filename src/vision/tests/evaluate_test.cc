@@ -272,6 +272,86 @@ TEST(EvaluateImageTest, FalsePositivesAreTracedToTheBlockTheyStandAt) {
   EXPECT_FALSE(FalsePositiveHosts(truth, {detections[0]}, sizes, *evaluation).ok());
 }
 
+// The image points of the surface of the part of a box between `from` and `to` (object frame), every
+// millimetre, through the camera's lens: what a block shows when the rest of it is hidden.
+std::vector<Eigen::Vector2d> PartInView(const Camera& camera, const geometry::Pose3& world_T_object,
+                                        const Eigen::Vector3d& from, const Eigen::Vector3d& to) {
+  std::vector<Eigen::Vector2d> out;
+  constexpr double kStep = 0.001;
+  auto steps = [&](int axis) {
+    return std::max(1, static_cast<int>(std::lround((to[axis] - from[axis]) / kStep)));
+  };
+  for (int fixed = 0; fixed < 3; ++fixed) {
+    const int u = (fixed + 1) % 3, v = (fixed + 2) % 3;
+    for (const double side : {from[fixed], to[fixed]}) {
+      for (int i = 0; i <= steps(u); ++i) {
+        for (int j = 0; j <= steps(v); ++j) {
+          Eigen::Vector3d p;
+          p[fixed] = side;
+          p[u] = from[u] + (to[u] - from[u]) * i / steps(u);
+          p[v] = from[v] + (to[v] - from[v]) * j / steps(v);
+          if (auto px = camera.Project(world_T_object * p)) out.push_back(*px);
+        }
+      }
+    }
+  }
+  return out;
+}
+
+TEST(ShorterModelsInViewTest, ABarWhoseFarHalfIsHiddenShowsAsACube) {
+  const std::map<std::string, Eigen::Vector3d> sizes = {{"cube45", {0.045, 0.045, 0.045}},
+                                                        {"bar90", {0.09, 0.045, 0.045}},
+                                                        {"tall135", {0.045, 0.045, 0.135}},
+                                                        {"slab", {0.09, 0.06, 0.03}}};
+  // A camera 0.5 m off, 40 deg above the table, with barrel distortion, looking at the origin.
+  const Eigen::Vector3d eye(0.3, 0.25, 0.32);
+  const Eigen::Vector3d z = (-eye).normalized();
+  const Eigen::Vector3d x = z.cross(Eigen::Vector3d::UnitZ()).normalized();
+  Eigen::Matrix3d world_R_camera;
+  world_R_camera << x, z.cross(x), z;
+  const Camera camera(Intrinsics{760, 760, 319.5, 239.5}, Distortion{-0.2, 0.01, 0, 0, 0},
+                      geometry::Pose3(Eigen::Quaterniond(world_R_camera), eye), 640, 480);
+  const geometry::Pose3 bar(AxisAngle({0, 0, 1}, 0.5), {0.01, -0.02, 0.0225});
+  const Eigen::Vector3d half(0.045, 0.0225, 0.0225);
+  auto shorter = [&](const std::string& model, const geometry::Pose3& pose,
+                     const std::vector<Eigen::Vector2d>& px) {
+    auto r = ShorterModelsInView(sizes, model, pose, camera, px);
+    EXPECT_TRUE(r.ok()) << r.status().message();
+    return r.ok() ? *r : std::vector<std::string>{"error"};
+  };
+  using Names = std::vector<std::string>;
+  // All of the bar in view: no shorter model shows so.
+  EXPECT_EQ(shorter("bar90", bar, PartInView(camera, bar, -half, half)), Names{});
+  // Either half alone: a cube at that end.
+  EXPECT_EQ(shorter("bar90", bar, PartInView(camera, bar, {0, -0.0225, -0.0225}, half)), Names{"cube45"});
+  EXPECT_EQ(shorter("bar90", bar, PartInView(camera, bar, -half, {0, 0.0225, 0.0225})), Names{"cube45"});
+  // Half a millimetre more (under a pixel here) is within the margin; 4 mm more (about 5 px) is not.
+  EXPECT_EQ(shorter("bar90", bar, PartInView(camera, bar, {-0.0005, -0.0225, -0.0225}, half)),
+            Names{"cube45"});
+  EXPECT_EQ(shorter("bar90", bar, PartInView(camera, bar, {-0.004, -0.0225, -0.0225}, half)), Names{});
+  // A standing tall block: its lowest third shows as a cube or a bar on end (shortest first), its
+  // lowest two thirds as a bar alone.
+  const geometry::Pose3 tall(AxisAngle({0, 0, 1}, -0.2), {-0.02, 0.03, 0.0675});
+  const Eigen::Vector3d tall_half(0.0225, 0.0225, 0.0675);
+  EXPECT_EQ(shorter("tall135", tall, PartInView(camera, tall, -tall_half, {0.0225, 0.0225, -0.0225})),
+            (Names{"cube45", "bar90"}));
+  EXPECT_EQ(shorter("tall135", tall, PartInView(camera, tall, -tall_half, {0.0225, 0.0225, 0.0225})),
+            Names{"bar90"});
+  // A cube has no shorter model of its section, nor a slab.
+  const geometry::Pose3 cube(AxisAngle({0, 0, 1}, 0.1), {0, 0, 0.0225});
+  EXPECT_EQ(
+      shorter("cube45", cube, PartInView(camera, cube, {-0.0225, -0.0225, -0.0225}, {0, 0.0225, 0.0225})),
+      Names{});
+  const geometry::Pose3 slab(Eigen::Quaterniond::Identity(), {0, 0, 0.015});
+  EXPECT_EQ(shorter("slab", slab, PartInView(camera, slab, {-0.045, -0.03, -0.015}, {0, 0.03, 0.015})),
+            Names{});
+  // Nothing in view: nothing to explain. A model without a size is an error that names it.
+  EXPECT_EQ(shorter("bar90", bar, {}), Names{});
+  auto unknown = ShorterModelsInView(sizes, "wedge", bar, camera, {{100, 100}});
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_NE(unknown.status().message().find("wedge"), std::string::npos);
+}
+
 TEST(SummaryTest, UnoccludedObjectsAreCountedApartFromTheHighBin) {
   // Four objects of the >= 0.7 bin; only the two at most 1 % hidden are unoccluded.
   ImageEvaluation image;

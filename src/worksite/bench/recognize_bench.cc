@@ -10,7 +10,11 @@
 // against the truth (vision::SymmetricProjectionRms: every method's, LINE-MOD's raw poses too) and
 // time per image (thread CPU time, one OpenCV thread); and, since each method's medians are over the
 // blocks it found, each peer's pose figures beside teachsim's on the blocks both found
-// (vision::PairedBuilder; "paired_with_teachsim" in the JSON). --render-seeds: the
+// (vision::PairedBuilder; "paired_with_teachsim" in the JSON); and on the renders, each method's
+// recall apart from the blocks that a shorter model would show alike (vision::ShorterModelsInView: a
+// bar whose far end the cylinder hides or the image border cuts off shows as a cube at its near end;
+// "recall_identifiable", "explained_by_shorter_model_per_bin" and
+// "teachsim_false_positives_as_shorter_model" in the JSON). --render-seeds: the
 // renders of each seed (60 scenes; default 7), several pooled into one data set; --no-peer: teachsim
 // alone (LINE-MOD's templates not even made).
 // Environment: TEACHSIM_HOME (repository), TEACHSIM_SHARED (../shared), TEACHSIM_CACHE_DIR
@@ -114,6 +118,10 @@ struct Case {
   scene::CameraSpec camera;
   std::optional<vision::FrameTruth> frame;
   std::vector<vision::TruthObject> truth;
+  // Per truth object, the shorter models that would show in the image as it does
+  // (vision::ShorterModelsInView); empty where none does, and for the dev set (its truth has no
+  // pixels in view).
+  std::vector<std::vector<std::string>> shorter_in_view;
 };
 
 struct DataSet {
@@ -295,10 +303,15 @@ Result<DataSet> MakeRenderedSet(const vision::TruthSet& library, int count, std:
     out.image = rendered.image;
     out.camera = camera;
     out.frame = frame;
+    const std::vector<std::vector<Eigen::Vector2d>> in_view = PixelsInView(rendered);
     for (std::size_t i = first_block; i < rendered.objects.size(); ++i) {
       const ObjectTruth& t = rendered.objects[i];
       if (t.model == "occluder") continue;
       out.truth.push_back({t.name, t.model, t.world_T_object, t.visible_fraction, t.visible_pixels});
+      TEACHSIM_ASSIGN_OR_RETURN(
+          std::vector<std::string> shorter,
+          vision::ShorterModelsInView(library.model_sizes_m, t.model, t.world_T_object, cam, in_view[i]));
+      out.shorter_in_view.push_back(std::move(shorter));
     }
     set.cases.push_back(std::move(out));
   }
@@ -707,7 +720,22 @@ struct DataSetResult {
   // the stage that lost it; at a found block; at a block too little visible to be scored; at none.
   int false_at_missed[vision::kLossStages] = {};
   int false_at_found = 0, false_at_unscored = 0, false_elsewhere = 0;
+  // Scored objects per bin whose view a shorter model explains (Case::shorter_in_view), and per
+  // method those of them found and those of the rest (the identifiable) found.
+  int explained[3] = {0, 0, 0};
+  int explained_found[kMethodCount][3] = {};
+  int identifiable_found[kMethodCount][3] = {};
+  // teachsim's false detections that are a shorter model explaining the block they stand at.
+  int false_as_shorter = 0;
 };
+
+// Whether truth object i of `c` is one whose view a shorter model explains; with `model`, whether
+// that model is one of them.
+bool ExplainedByShorter(const Case& c, std::size_t i, const std::string* model = nullptr) {
+  if (i >= c.shorter_in_view.size() || c.shorter_in_view[i].empty()) return false;
+  return model == nullptr || std::find(c.shorter_in_view[i].begin(), c.shorter_in_view[i].end(), *model) !=
+                                 c.shorter_in_view[i].end();
+}
 
 vision::Detection FromRecognition(const vision::Recognition& r, bool raw) {
   return {r.model, raw ? r.raw_world_T_object : r.world_T_object, r.score, r.reprojection_rms_px};
@@ -802,9 +830,12 @@ int Run(const BenchArgs& args) {
     DataSetResult& result = results[s];
     sets[s].images += static_cast<int>(cases.size());
     for (const Case& c : cases) {
-      for (const vision::TruthObject& t : c.truth) {
+      for (std::size_t i = 0; i < c.truth.size(); ++i) {
+        const vision::TruthObject& t = c.truth[i];
         if (t.visible_fraction >= match.min_visible_fraction && t.visible_pixels > 0) {
           ++result.bins[static_cast<int>(vision::BinOf(t.visible_fraction))];
+          if (ExplainedByShorter(c, i))
+            ++result.explained[static_cast<int>(vision::BinOf(t.visible_fraction))];
         }
       }
       auto camera = vision::Camera::FromSpec(c.camera);
@@ -1021,6 +1052,8 @@ int Run(const BenchArgs& args) {
               ++result.false_elsewhere;
               continue;
             }
+            if (ExplainedByShorter(c, static_cast<std::size_t>(host), &found[0][d].model))
+              ++result.false_as_shorter;
             const int outcome = outcome_of[static_cast<std::size_t>(host)];
             if (outcome == -1)
               ++result.false_at_unscored;
@@ -1100,6 +1133,14 @@ int Run(const BenchArgs& args) {
         if (!evaluation.ok()) return ReportCaseError(c, evaluation.status(), 1);
         result.builders[m].Add(*evaluation,
                                m <= 1 ? recognized_time : vision::ImageTime{time_ms[m], c.name, {}, {}});
+        for (const vision::ObjectOutcome& o : evaluation->objects) {
+          if (o.detection < 0) continue;
+          const int bin = static_cast<int>(vision::BinOf(o.visible_fraction));
+          if (ExplainedByShorter(c, static_cast<std::size_t>(o.truth)))
+            ++result.explained_found[m][bin];
+          else
+            ++result.identifiable_found[m][bin];
+        }
         evaluations[m] = std::move(*evaluation);
       }
       for (int m = kFirstPeer; m < method_count; ++m) {
@@ -1189,6 +1230,21 @@ int Run(const BenchArgs& args) {
       if (m >= kFirstPeer)
         summary["paired_with_teachsim"] =
             vision::PairedSummaryToJson(results[s].paired[m].Build(), "teachsim", "peer");
+      // Recall apart from the blocks whose view a shorter model explains, and how many of those
+      // were found all the same.
+      json::Json identifiable = json::Json::object(), explained_found = json::Json::object();
+      for (int b = 0; b < 3; ++b) {
+        const char* bin = vision::BinName(static_cast<vision::VisibilityBin>(b));
+        const int objects = results[s].bins[b] - results[s].explained[b];
+        const int found = results[s].identifiable_found[m][b];
+        identifiable[bin] = {
+            {"objects", objects},
+            {"found", found},
+            {"recall", objects > 0 ? json::Json(static_cast<double>(found) / objects) : json::Json()}};
+        explained_found[bin] = results[s].explained_found[m][b];
+      }
+      summary["recall_identifiable"] = identifiable;
+      summary["found_of_explained_by_shorter"] = explained_found;
       methods[kMethods[m]] = summary;
     }
     json::Json losses = json::Json::object();
@@ -1237,6 +1293,11 @@ int Run(const BenchArgs& args) {
          {"images", sets[s].images},
          {"scored_objects_per_bin",
           {{">=0.7", results[s].bins[0]}, {"0.4-0.7", results[s].bins[1]}, {"<0.4", results[s].bins[2]}}},
+         {"explained_by_shorter_model_per_bin",
+          {{">=0.7", results[s].explained[0]},
+           {"0.4-0.7", results[s].explained[1]},
+           {"<0.4", results[s].explained[2]}}},
+         {"teachsim_false_positives_as_shorter_model", results[s].false_as_shorter},
          {"methods", methods}});
   }
   const json::Json document{
@@ -1318,6 +1379,16 @@ int Run(const BenchArgs& args) {
     for (const char* bin : {">=0.7", "0.4-0.7", "<0.4"}) {
       const std::string label = std::string("recall, visible ") + bin;
       row(label.c_str(), [&](const json::Json& j) { return number(j["recall"][bin]["recall"], "%.3f"); });
+    }
+    // Recall without the blocks that a shorter model would show alike (a bar whose far end the
+    // cylinder hides), where there are any.
+    const json::Json& explained = set["explained_by_shorter_model_per_bin"];
+    if (explained[">=0.7"].get<int>() + explained["0.4-0.7"].get<int>() + explained["<0.4"].get<int>() > 0) {
+      for (const char* bin : {">=0.7", "0.4-0.7", "<0.4"}) {
+        const std::string label = std::string("  identifiable ") + bin;
+        row(label.c_str(),
+            [&](const json::Json& j) { return number(j["recall_identifiable"][bin]["recall"], "%.3f"); });
+      }
     }
     row("false positives / image", [&](const json::Json& j) { return number(j["false_positives_per_image"], "%.3f"); });
     row("found within pose goals", [&](const json::Json& j) { return number(j["found_within_goals_fraction"], "%.3f"); });
@@ -1406,6 +1477,18 @@ int Run(const BenchArgs& args) {
     std::printf("), at a found block %d, at an unscored block %d, elsewhere %d\n",
                 fp["at_found_block"].get<int>(), fp["at_unscored_block"].get<int>(),
                 fp["elsewhere"].get<int>());
+    if (explained[">=0.7"].get<int>() + explained["0.4-0.7"].get<int>() + explained["<0.4"].get<int>() > 0) {
+      std::printf(
+          "  blocks a shorter model would show alike (its far end hidden or outside the image), per bin: %d "
+          "/ %d / "
+          "%d, of them teachsim found %d / %d / %d; teachsim's false detections that are such a shorter "
+          "model: %d\n",
+          explained[">=0.7"].get<int>(), explained["0.4-0.7"].get<int>(), explained["<0.4"].get<int>(),
+          set["methods"]["teachsim"]["found_of_explained_by_shorter"][">=0.7"].get<int>(),
+          set["methods"]["teachsim"]["found_of_explained_by_shorter"]["0.4-0.7"].get<int>(),
+          set["methods"]["teachsim"]["found_of_explained_by_shorter"]["<0.4"].get<int>(),
+          set["teachsim_false_positives_as_shorter_model"].get<int>());
+    }
   }
   return 0;
 }

@@ -52,6 +52,30 @@ class BenchRecognizeCliTest : public ::testing::Test {
   std::string cache_;
 };
 
+// In one data set's bin: the blocks a shorter model would show alike and the rest (the identifiable)
+// add up to the bin's blocks, and what teachsim found of each to what it found; the rest's recall is
+// their ratio; teachsim's false detections that are such a shorter model are among its false ones.
+void ExpectIdentifiableAddsUp(const json::Json& set, const char* bin) {
+  const json::Json& m = set["methods"]["teachsim"];
+  const json::Json& rest = m["recall_identifiable"][bin];
+  const int explained = set["explained_by_shorter_model_per_bin"][bin].get<int>();
+  EXPECT_GE(explained, 0) << bin;
+  EXPECT_EQ(rest["objects"].get<int>() + explained, m["recall"][bin]["objects"].get<int>()) << bin;
+  EXPECT_EQ(rest["found"].get<int>() + m["found_of_explained_by_shorter"][bin].get<int>(),
+            m["recall"][bin]["found"].get<int>())
+      << bin;
+  EXPECT_LE(m["found_of_explained_by_shorter"][bin].get<int>(), explained) << bin;
+  if (rest["objects"].get<int>() > 0) {
+    EXPECT_DOUBLE_EQ(rest["recall"].get<double>(),
+                     rest["found"].get<double>() / rest["objects"].get<double>())
+        << bin;
+  } else {
+    EXPECT_TRUE(rest["recall"].is_null()) << bin;
+  }
+  EXPECT_GE(set["teachsim_false_positives_as_shorter_model"].get<int>(), 0);
+  EXPECT_LE(set["teachsim_false_positives_as_shorter_model"].get<int>(), m["false_positives"].get<int>());
+}
+
 TEST_F(BenchRecognizeCliTest, SeveralRenderSeedsArePooledIntoOneDataSet) {
   const json::Json pooled = Run("--render-seeds 3-4");
   const json::Json three = Run("--render-seeds 3");
@@ -134,7 +158,19 @@ TEST_F(BenchRecognizeCliTest, SeveralRenderSeedsArePooledIntoOneDataSet) {
                                   b["teachsim_verification_losses_at_border"][bin][verdict].get<int>())
           << bin << " " << verdict;
     }
+    // The blocks a shorter model would show alike and the rest add up to the bin, found and all,
+    // pooled as the rest.
+    ExpectIdentifiableAddsUp(set, bin);
+    ExpectIdentifiableAddsUp(a, bin);
+    ExpectIdentifiableAddsUp(b, bin);
+    EXPECT_EQ(set["explained_by_shorter_model_per_bin"][bin].get<int>(),
+              a["explained_by_shorter_model_per_bin"][bin].get<int>() +
+                  b["explained_by_shorter_model_per_bin"][bin].get<int>())
+        << bin;
   }
+  EXPECT_EQ(set["teachsim_false_positives_as_shorter_model"].get<int>(),
+            a["teachsim_false_positives_as_shorter_model"].get<int>() +
+                b["teachsim_false_positives_as_shorter_model"].get<int>());
   // Where the time went: every image's stages, and the slowest image named with its seed and its
   // counts (which of the pooled images it was; the times themselves differ from run to run).
   EXPECT_LE(m["images_over_time_goal"].get<int>(), 6);

@@ -2,9 +2,12 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <set>
+
+#include "teachsim/vision/evaluate.h"
 
 namespace teachsim::worksite {
 namespace {
@@ -234,6 +237,54 @@ TEST(RenderTest, VisibleFractionCountsOcclusionAndTheImageBorder) {
   edge.world_T_object = geometry::Pose3::Translation(ray.origin_in_world + t * ray.direction_in_world);
   const RenderResult clipped = renderer->Render({edge}, 1);
   EXPECT_NEAR(clipped.objects[0].visible_fraction, 0.5, 0.1);
+}
+
+// The labels give each object its pixels in view; a bar whose far half the image border cuts off
+// shows in them what a cube at its near end would (vision::ShorterModelsInView), a bar in full view
+// or one that reaches well past its middle into the image does not.
+TEST(RenderTest, PixelsInViewTellWhatAShorterBlockWouldShowAlike) {
+  const scene::Scene scene = PuzzleScene();
+  const vision::Camera camera = MainCamera(scene);
+  auto renderer = Renderer::Create(camera, RenderOptions::HighContrast());
+  ASSERT_TRUE(renderer.ok());
+  const Eigen::Vector3d size(0.09, 0.045, 0.045);
+  auto box = geometry::ConvexPolyhedron::Box(size);
+  ASSERT_TRUE(box.ok());
+  RenderObject bar;
+  bar.name = "bar";
+  bar.model = "bar90";
+  bar.parts = {
+      {std::make_shared<const geometry::ConvexPolyhedron>(std::move(*box)), geometry::Pose3::Identity()}};
+  // Its long axis along the image's rows, as they run over the table.
+  Eigen::Vector3d along = camera.world_T_camera().rotation * Eigen::Vector3d::UnitX();
+  along.z() = 0;
+  const Eigen::Quaterniond yaw =
+      Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitX(), along.normalized());
+  // The bar's centre on the table where the ray through image column u, middle row, meets its height.
+  auto bar_at_column = [&](double u) {
+    const vision::Ray ray = *camera.Unproject(Eigen::Vector2d(u, 239.5));
+    const double t = (0.0225 - ray.origin_in_world.z()) / ray.direction_in_world.z();
+    RenderObject o = bar;
+    o.world_T_object = geometry::Pose3(yaw, ray.origin_in_world + t * ray.direction_in_world);
+    return o;
+  };
+  const std::map<std::string, Eigen::Vector3d> sizes = {{"cube45", {0.045, 0.045, 0.045}}, {"bar90", size}};
+  auto shorter = [&](const RenderObject& o) {
+    const RenderResult result = renderer->Render({o}, 1);
+    const std::vector<std::vector<Eigen::Vector2d>> in_view = PixelsInView(result);
+    EXPECT_EQ(in_view.size(), 1u);
+    EXPECT_EQ(static_cast<int>(in_view[0].size()), result.objects[0].visible_pixels);
+    for (const Eigen::Vector2d& p : in_view[0]) EXPECT_EQ(LabelAt(result.labels, p), 0) << p.transpose();
+    auto names = vision::ShorterModelsInView(sizes, "bar90", o.world_T_object, camera, in_view[0]);
+    EXPECT_TRUE(names.ok()) << names.status().message();
+    return names.ok() ? *names : std::vector<std::string>{"error"};
+  };
+  using Names = std::vector<std::string>;
+  EXPECT_EQ(shorter(bar_at_column(319.5)), Names{});
+  // Its middle 15 px left of the image: the half in view is a cube's.
+  EXPECT_EQ(shorter(bar_at_column(-15)), Names{"cube45"});
+  // Its middle 30 px into the image: more than a cube in view.
+  EXPECT_EQ(shorter(bar_at_column(30)), Names{});
 }
 
 TEST(RenderTest, RejectsBadOptions) {

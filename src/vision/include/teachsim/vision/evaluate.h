@@ -158,6 +158,20 @@ struct ImageEvaluation {
     const std::map<std::string, Eigen::Vector3d>& model_sizes_m, const ImageEvaluation& evaluation,
     double margin_m = 0.005);
 
+// The shorter models of the library that would show in the image as the block does: a model with
+// the same cross-section (two sides equal to two of the block's, within 1e-6 m) and a shorter third
+// side, laid along the block flush with one of its ends, whose outline (the hull of its corners'
+// projections, lens distortion removed) holds the centre of every pixel in view of the block within
+// `margin_px`. A bar whose far half the dark cylinder hides, or the image border cuts off, shows what
+// a cube at its near end would: one image cannot tell them apart. `visible_px` are the centres of the
+// block's pixels in view, in image pixels as the camera saw them (distorted). Shortest first; empty
+// when no shorter model explains the view, when nothing of the block is in view, or when a corner
+// lies behind the camera. Fails when `model` has no size in `model_sizes_m`.
+[[nodiscard]] Result<std::vector<std::string>> ShorterModelsInView(
+    const std::map<std::string, Eigen::Vector3d>& model_sizes_m, const std::string& model,
+    const geometry::Pose3& world_T_object, const Camera& camera,
+    const std::vector<Eigen::Vector2d>& visible_px, double margin_px = 2);
+
 // --- Summary ---------------------------------------------------------------------------------------
 
 struct Stats {

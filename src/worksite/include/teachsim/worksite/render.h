@@ -96,6 +96,10 @@ class Renderer {
   double max_ideal_radius2_ = 0;  // squared normalized radius of the farthest image corner
 };
 
+// Each rendered object's pixels in view: the centres (u, v) of the pixels `result.labels` gives it,
+// row by row, indexed as result.objects.
+std::vector<std::vector<Eigen::Vector2d>> PixelsInView(const RenderResult& result);
+
 // The scene's objects: fixed objects whose top is at the table plane (z <= 1 mm) get the table's
 // material, all others wood; each gets a texture seed from its name.
 std::vector<RenderObject> ObjectsFromScene(const scene::Scene& scene);
