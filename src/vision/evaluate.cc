@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <opencv2/imgproc.hpp>
+#include <tuple>
 
 #include "teachsim/vision/recognition_stages.h"
 
@@ -365,8 +366,33 @@ Result<std::vector<std::string>> ShorterModelsInView(
   const auto it = model_sizes_m.find(model);
   if (it == model_sizes_m.end()) return Status::InvalidInput("model \"" + model + "\" has no box size");
   const Eigen::Vector3d& size = it->second;
+  // The shorter models of the block's cross-section: cut along the block's axis k, the other two
+  // sides match two of the model's, whose third side (its length there) is shorter. Models whose
+  // sides match so in two ways have equal lengths both ways: each is taken once.
+  constexpr double kSameM = 1e-6;
+  struct Candidate {
+    double length;
+    std::string name;
+    int axis;
+  };
+  std::vector<Candidate> candidates;
+  for (const auto& [name, other] : model_sizes_m) {
+    for (int k = 0; k < 3; ++k) {
+      const double a1 = size[(k + 1) % 3], a2 = size[(k + 2) % 3];
+      bool taken = false;
+      for (int m = 0; m < 3 && !taken; ++m) {
+        const double b1 = other[(m + 1) % 3], b2 = other[(m + 2) % 3], length = other[m];
+        const bool same_section = (std::abs(a1 - b1) <= kSameM && std::abs(a2 - b2) <= kSameM) ||
+                                  (std::abs(a1 - b2) <= kSameM && std::abs(a2 - b1) <= kSameM);
+        if (same_section && length < size[k] - kSameM) {
+          candidates.push_back({length, name, k});
+          taken = true;
+        }
+      }
+    }
+  }
   std::vector<std::string> out;
-  if (visible_px.empty()) return out;
+  if (candidates.empty() || visible_px.empty()) return out;
   // The pixels in view, lens distortion removed (a pixel the lens model cannot undo is left out).
   std::vector<cv::Point2f> pinhole;
   pinhole.reserve(visible_px.size());
@@ -378,61 +404,39 @@ Result<std::vector<std::string>> ShorterModelsInView(
   if (pinhole.empty()) return out;
   const Eigen::Matrix3d K = camera.K();
   const geometry::Pose3 camera_T_object = camera.camera_T_world() * world_T_object;
-  constexpr double kSameM = 1e-6;
-  std::vector<std::pair<double, std::string>> found;  // (length, model)
-  for (const auto& [name, other] : model_sizes_m) {
-    bool explains = false;
-    // Cut along the block's axis k: the other two sides must match two of the other model's, whose
-    // third side is shorter.
-    for (int k = 0; k < 3 && !explains; ++k) {
-      const double a1 = size[(k + 1) % 3], a2 = size[(k + 2) % 3];
-      for (int m = 0; m < 3 && !explains; ++m) {
-        const double b1 = other[(m + 1) % 3], b2 = other[(m + 2) % 3], length = other[m];
-        const bool same_section = (std::abs(a1 - b1) <= kSameM && std::abs(a2 - b2) <= kSameM) ||
-                                  (std::abs(a1 - b2) <= kSameM && std::abs(a2 - b1) <= kSameM);
-        if (!same_section || !(length < size[k] - kSameM)) continue;
-        for (const double end : {-1.0, 1.0}) {
-          // The shorter box, in the block's frame: flush with the end at `end` * size[k] / 2.
-          Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-          centre[k] = end * 0.5 * (size[k] - length);
-          Eigen::Vector3d half = 0.5 * size;
-          half[k] = 0.5 * length;
-          std::vector<cv::Point2f> corners;
-          bool in_front = true;
-          for (int v = 0; v < 8; ++v) {
-            const Eigen::Vector3d local =
-                centre + Eigen::Vector3d((v & 1) ? half.x() : -half.x(), (v & 2) ? half.y() : -half.y(),
-                                         (v & 4) ? half.z() : -half.z());
-            const Eigen::Vector3d p = camera_T_object * local;
-            if (!(p.z() > 1e-6)) {
-              in_front = false;
-              break;
-            }
-            const Eigen::Vector2d px = (K * p).hnormalized();
-            corners.emplace_back(static_cast<float>(px.x()), static_cast<float>(px.y()));
-          }
-          if (!in_front) return std::vector<std::string>{};
-          std::vector<cv::Point2f> hull;
-          cv::convexHull(corners, hull);
-          bool all_inside = true;
-          for (const cv::Point2f& p : pinhole) {
-            // Signed distance: positive inside, negative outside.
-            if (cv::pointPolygonTest(hull, p, true) < -margin_px) {
-              all_inside = false;
-              break;
-            }
-          }
-          if (all_inside) {
-            explains = true;
-            found.emplace_back(length, name);
-            break;
-          }
-        }
+  std::sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
+    return std::tie(a.length, a.name) < std::tie(b.length, b.name);
+  });
+  for (const Candidate& c : candidates) {
+    if (!out.empty() && out.back() == c.name) continue;  // explained along another axis already
+    for (const double end : {-1.0, 1.0}) {
+      // The shorter box, in the block's frame: flush with the end at `end` * size[axis] / 2.
+      Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+      centre[c.axis] = end * 0.5 * (size[c.axis] - c.length);
+      Eigen::Vector3d half = 0.5 * size;
+      half[c.axis] = 0.5 * c.length;
+      std::vector<cv::Point2f> corners;
+      for (int v = 0; v < 8; ++v) {
+        const Eigen::Vector3d local =
+            centre + Eigen::Vector3d((v & 1) ? half.x() : -half.x(), (v & 2) ? half.y() : -half.y(),
+                                     (v & 4) ? half.z() : -half.z());
+        const Eigen::Vector3d p = camera_T_object * local;
+        if (!(p.z() > 1e-6)) return std::vector<std::string>{};
+        const Eigen::Vector2d px = (K * p).hnormalized();
+        corners.emplace_back(static_cast<float>(px.x()), static_cast<float>(px.y()));
+      }
+      std::vector<cv::Point2f> hull;
+      cv::convexHull(corners, hull);
+      // Signed distance: positive inside, negative outside.
+      const bool all_inside = std::all_of(pinhole.begin(), pinhole.end(), [&](const cv::Point2f& p) {
+        return cv::pointPolygonTest(hull, p, true) >= -margin_px;
+      });
+      if (all_inside) {
+        out.push_back(c.name);
+        break;
       }
     }
   }
-  std::sort(found.begin(), found.end());
-  for (auto& [length, name] : found) out.push_back(std::move(name));
   return out;
 }
 
@@ -528,14 +532,13 @@ Summary SummaryBuilder::Build() const {
   return s;
 }
 
-namespace {
-// One recall figure: its objects, those found and their share (null when there are none).
-json::Json RecallToJson(int objects, int found, double recall) {
+json::Json RecallToJson(int objects, int found) {
   return {{"objects", objects},
           {"found", found},
-          {"recall", std::isfinite(recall) ? json::Json(recall) : json::Json(nullptr)}};
+          {"recall", objects > 0 ? json::Json(static_cast<double>(found) / objects) : json::Json(nullptr)}};
 }
 
+namespace {
 // A set of pose figures under the names both summaries give them in JSON.
 json::Json PoseFiguresToJson(const PoseFigures& f) {
   return {{"rotation_error_deg", StatsToJson(f.rotation_deg)},
@@ -550,10 +553,10 @@ json::Json SummaryToJson(const Summary& s) {
   json::Json recall = json::Json::object();
   for (VisibilityBin bin : {VisibilityBin::kHigh, VisibilityBin::kMedium, VisibilityBin::kLow}) {
     const int i = static_cast<int>(bin);
-    recall[BinName(bin)] = RecallToJson(s.objects[i], s.found[i], s.Recall(bin));
+    recall[BinName(bin)] = RecallToJson(s.objects[i], s.found[i]);
   }
   const int found = s.found[0] + s.found[1] + s.found[2];
-  json::Json unoccluded = RecallToJson(s.unoccluded_objects, s.unoccluded_found, s.RecallUnoccluded());
+  json::Json unoccluded = RecallToJson(s.unoccluded_objects, s.unoccluded_found);
   unoccluded["min_visible_fraction"] = kUnoccludedFraction;
   json::Json stages = json::Json::object();
   for (const auto& [stage, stats] : s.stage_time_ms) stages[stage] = StatsToJson(stats);

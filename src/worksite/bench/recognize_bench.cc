@@ -1235,12 +1235,8 @@ int Run(const BenchArgs& args) {
       json::Json identifiable = json::Json::object(), explained_found = json::Json::object();
       for (int b = 0; b < 3; ++b) {
         const char* bin = vision::BinName(static_cast<vision::VisibilityBin>(b));
-        const int objects = results[s].bins[b] - results[s].explained[b];
-        const int found = results[s].identifiable_found[m][b];
-        identifiable[bin] = {
-            {"objects", objects},
-            {"found", found},
-            {"recall", objects > 0 ? json::Json(static_cast<double>(found) / objects) : json::Json()}};
+        identifiable[bin] = vision::RecallToJson(results[s].bins[b] - results[s].explained[b],
+                                                 results[s].identifiable_found[m][b]);
         explained_found[bin] = results[s].explained_found[m][b];
       }
       summary["recall_identifiable"] = identifiable;

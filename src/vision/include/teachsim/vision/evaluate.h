@@ -267,6 +267,10 @@ class SummaryBuilder {
 
 json::Json SummaryToJson(const Summary& summary);
 
+// One recall figure as the summaries give it: {"objects", "found", "recall"} (null when there are
+// no objects).
+json::Json RecallToJson(int objects, int found);
+
 // --- Paired comparison ---------------------------------------------------------------------------
 
 // Two methods' pose figures on the objects that both found. Each method's own medians are taken
