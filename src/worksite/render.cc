@@ -614,6 +614,24 @@ std::vector<std::vector<Eigen::Vector2d>> PixelsInView(const RenderResult& resul
   return out;
 }
 
+std::vector<std::vector<Eigen::Vector2d>> OutlinePixelsInView(const RenderResult& result) {
+  std::vector<std::vector<Eigen::Vector2d>> out(result.objects.size());
+  const cv::Mat& labels = result.labels;
+  auto label = [&](int u, int v) -> int {
+    return u < 0 || v < 0 || u >= labels.cols || v >= labels.rows ? -1 : labels.at<std::int16_t>(v, u);
+  };
+  for (int v = 0; v < labels.rows; ++v) {
+    for (int u = 0; u < labels.cols; ++u) {
+      const int own = label(u, v);
+      if (own < 0 || static_cast<std::size_t>(own) >= out.size()) continue;
+      if (label(u - 1, v) != own || label(u + 1, v) != own || label(u, v - 1) != own ||
+          label(u, v + 1) != own)
+        out[static_cast<std::size_t>(own)].emplace_back(u, v);
+    }
+  }
+  return out;
+}
+
 std::vector<RenderObject> ObjectsFromScene(const scene::Scene& scene) {
   std::vector<RenderObject> out;
   for (const scene::SceneObject& o : scene.objects) {

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -277,6 +278,14 @@ TEST(RenderTest, PixelsInViewTellWhatAShorterBlockWouldShowAlike) {
     for (const Eigen::Vector2d& p : in_view[0]) EXPECT_EQ(LabelAt(result.labels, p), 0) << p.transpose();
     auto names = vision::ShorterModelsInView(sizes, "bar90", o.world_T_object, camera, in_view[0]);
     EXPECT_TRUE(names.ok()) << names.status().message();
+    // The region's outline: some of its pixels, far fewer, and the same answer.
+    const std::vector<std::vector<Eigen::Vector2d>> outline = OutlinePixelsInView(result);
+    EXPECT_EQ(outline.size(), 1u);
+    EXPECT_GT(outline[0].size(), 0u);
+    EXPECT_LT(5 * outline[0].size(), in_view[0].size());
+    for (const Eigen::Vector2d& p : outline[0]) EXPECT_EQ(LabelAt(result.labels, p), 0) << p.transpose();
+    auto from_outline = vision::ShorterModelsInView(sizes, "bar90", o.world_T_object, camera, outline[0]);
+    EXPECT_TRUE(from_outline.ok() && names.ok() && *from_outline == *names);
     return names.ok() ? *names : std::vector<std::string>{"error"};
   };
   using Names = std::vector<std::string>;
@@ -285,6 +294,30 @@ TEST(RenderTest, PixelsInViewTellWhatAShorterBlockWouldShowAlike) {
   EXPECT_EQ(shorter(bar_at_column(-15)), Names{"cube45"});
   // Its middle 30 px into the image: more than a cube in view.
   EXPECT_EQ(shorter(bar_at_column(30)), Names{});
+}
+
+// The outline of a region: its pixels with a 4-neighbour of another label or outside the image.
+TEST(RenderTest, OutlinePixelsInViewAreTheRegionsRim) {
+  RenderResult result;
+  result.objects.resize(2);
+  result.labels = cv::Mat(6, 8, CV_16SC1, cv::Scalar(-1));
+  result.labels(cv::Rect(1, 1, 5, 4)).setTo(0);  // a 5 x 4 block inside the image: 14 on its rim
+  result.labels(cv::Rect(6, 0, 2, 6)).setTo(1);  // a 2 x 6 strip along the right border: all 12
+  result.labels.at<std::int16_t>(2, 3) = 1;      // a pixel of 1 inside 0: its 4 neighbours join the rim
+  const auto outline = OutlinePixelsInView(result);
+  const auto all = PixelsInView(result);
+  ASSERT_EQ(outline.size(), 2u);
+  EXPECT_EQ(all[0].size(), 19u);
+  EXPECT_EQ(outline[0].size(), 14u + 3u);  // the rim, and the 3 inner pixels beside the one of 1
+  EXPECT_EQ(outline[1].size(), 13u);
+  for (int k = 0; k < 2; ++k) {
+    for (const Eigen::Vector2d& p : outline[static_cast<size_t>(k)])
+      EXPECT_NE(std::find(all[static_cast<size_t>(k)].begin(), all[static_cast<size_t>(k)].end(), p),
+                all[static_cast<size_t>(k)].end());
+  }
+  const std::vector<Eigen::Vector2d> inner = {{2, 2}, {4, 2}, {3, 3}};
+  for (const Eigen::Vector2d& p : inner)
+    EXPECT_NE(std::find(outline[0].begin(), outline[0].end(), p), outline[0].end()) << p.transpose();
 }
 
 TEST(RenderTest, RejectsBadOptions) {

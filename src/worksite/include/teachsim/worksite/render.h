@@ -99,6 +99,11 @@ class Renderer {
 // Each rendered object's pixels in view: the centres (u, v) of the pixels `result.labels` gives it,
 // row by row, indexed as result.objects.
 std::vector<std::vector<Eigen::Vector2d>> PixelsInView(const RenderResult& result);
+// Of those, the pixels on the outline of each object's region: those with a 4-neighbour that is not
+// the object's (or outside the image). A point set lies in a convex region when its outline does,
+// also after a continuous one-to-one map such as undoing the lens: vision::ShorterModelsInView
+// gives the same answer for these as for all the pixels, and undistorts far fewer.
+std::vector<std::vector<Eigen::Vector2d>> OutlinePixelsInView(const RenderResult& result);
 
 // The scene's objects: fixed objects whose top is at the table plane (z <= 1 mm) get the table's
 // material, all others wood; each gets a texture seed from its name.
