@@ -1926,10 +1926,14 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
     const auto ts = Clock::now();
     // The pieces of each straight edge joined once, for the corners and the occluding contours.
     const JoinedLines joined = JoinCollinearLines(lines);
-    const std::vector<ImageCorner> corners = FindCorners(joined, options_);
+    std::vector<ImageCorner> corners = FindCorners(joined, options_);
     if (options_.occlusion_reverify && options_.occlusion_contours) {
       contours = OccludingContours(detection, joined, camera, options_);
       contours_found = true;
+      if (options_.support_hidden_corners) {
+        const std::vector<ImageCorner> hidden = FindHiddenCorners(joined, contours, corners, options_);
+        corners.insert(corners.end(), hidden.begin(), hidden.end());
+      }
     }
     const std::vector<SupportHypothesis> support_hypotheses =
         SupportHypotheses(models_, camera, detection, corners, planes, options_, contours);

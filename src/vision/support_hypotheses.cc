@@ -324,6 +324,72 @@ JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines) {
   return out;
 }
 
+std::vector<ImageCorner> FindHiddenCorners(const JoinedLines& joined, const std::vector<ImageLine>& contours,
+                                           const std::vector<ImageCorner>& corners,
+                                           const RecognizerOptions& options) {
+  TEACHSIM_CHECK(joined.extent.size() == joined.representative.size());
+  const double kAtContourPx = options.hidden_corner_reach_px, kMaxGapPx = options.hidden_corner_max_gap_px;
+  constexpr double kMinSinAngle = 0.34;  // 20 deg
+  // The joined edges with an end at a contour that they run into (at 15 deg or more to it): the
+  // edge's line, continued past that end, crosses the contour within kAtContourPx of the end.
+  struct EndAtContour {
+    int line = 0, end = 0;
+    Eigen::Vector2d at, far, direction;  // the end, the other end, unit from far to at
+  };
+  std::vector<EndAtContour> ends;
+  for (size_t l = 0; l < joined.extent.size(); ++l) {
+    if (joined.representative[l] != static_cast<int>(l)) continue;
+    const ImageLine& line = joined.extent[l];
+    const double length = line.Length();
+    if (!(length >= 8)) continue;
+    for (int end = 0; end < 2; ++end) {
+      const Eigen::Vector2d at = LineEnd(line, end), far = LineEnd(line, 1 - end);
+      const Eigen::Vector2d d = (at - far) / length;
+      for (const ImageLine& contour : contours) {
+        const double contour_length = contour.Length();
+        if (!(contour_length >= 1e-9)) continue;
+        const Eigen::Vector2d c = (contour.b - contour.a) / contour_length, n(-c.y(), c.x());
+        const double across = n.dot(d);
+        if (std::abs(across) < 0.26) continue;  // within 15 deg of the contour: not into it
+        // Where the edge's line meets the contour's, along the edge from its end (px).
+        const double t = -n.dot(at - contour.a) / across;
+        if (t < -kAtContourPx || t > kAtContourPx) continue;
+        const double s = c.dot(at + t * d - contour.a);
+        if (s < -kAtContourPx || s > contour_length + kAtContourPx) continue;
+        ends.push_back({static_cast<int>(l), end, at, far, d});
+        break;
+      }
+    }
+  }
+  std::vector<ImageCorner> out;
+  for (size_t x = 0; x < ends.size(); ++x) {
+    for (size_t y = x + 1; y < ends.size(); ++y) {
+      const EndAtContour& p = ends[x];
+      const EndAtContour& q = ends[y];
+      if (p.line == q.line) continue;
+      const double cross = p.direction.x() * q.direction.y() - p.direction.y() * q.direction.x();
+      if (std::abs(cross) < kMinSinAngle) continue;
+      // p.at + u p.direction = q.at + v q.direction, both beyond the ends.
+      const Eigen::Vector2d w = q.at - p.at;
+      const double u = (w.x() * q.direction.y() - w.y() * q.direction.x()) / cross;
+      const double v = (w.x() * p.direction.y() - w.y() * p.direction.x()) / cross;
+      if (u <= kAtContourPx || v <= kAtContourPx || u > kMaxGapPx || v > kMaxGapPx) continue;
+      bool known = false;
+      for (const ImageCorner& c : corners) {
+        known = known || (c.segments[0] == p.line && c.segments[1] == q.line) ||
+                (c.segments[0] == q.line && c.segments[1] == p.line);
+      }
+      if (known) continue;
+      ImageCorner corner;
+      corner.point = p.at + u * p.direction;
+      corner.arm_end = {p.far, q.far};
+      corner.segments = {p.line, q.line};
+      out.push_back(corner);
+    }
+  }
+  return out;
+}
+
 std::vector<ImageCorner> FindCorners(const std::vector<ImageLine>& lines, const RecognizerOptions& options) {
   return FindCorners(JoinCollinearLines(lines), options);
 }

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
@@ -579,6 +580,51 @@ TEST(ContoursTest, AShorterPoseEndsAtAContourInsideALongerOnesImage) {
   EXPECT_FALSE(EndsAtContourInside(cube, bar, {}));
   EXPECT_FALSE(EndsAtContourInside(Flat(200, 200, 245, 208), bar, {pole}));  // an end 8 px long
   EXPECT_TRUE(EndsAtContourInside(Flat(200, 200, 245, 210), bar, {pole}));   // 10 px
+}
+
+// A block's corner behind a pole: two edges that run into the pole's flank (x = 100) and whose lines
+// meet beyond it, at (130, 100), give a corner there; not an edge along the flank, an edge that ends
+// short of it, a pair already a corner, or a corner further beyond than the limit.
+TEST(ContoursTest, EdgesRunningIntoAContourMeetAtAHiddenCorner) {
+  const ImageLine flank{{100, 0}, {100, 200}};
+  const Eigen::Vector2d hidden(130, 100);
+  auto towards = [&](const Eigen::Vector2d& far, double stop_x) {
+    const Eigen::Vector2d d = hidden - far;
+    return ImageLine{far, far + (stop_x - far.x()) / d.x() * d};
+  };
+  const std::vector<ImageLine> lines = {
+      towards({40, 70}, 99),    // 0: ends 1 px before the flank
+      towards({60, 170}, 98),   // 1: ends 2 px before it
+      {{97, 20}, {97, 60}},     // 2: along the flank
+      {{10, 10}, {50, 20}},     // 3: ends far from it
+      towards({20, 140}, 80)};  // 4: aimed at the corner, but ends 20 px left of the flank
+  const JoinedLines joined = JoinCollinearLines(lines);
+  RecognizerOptions options;
+  const std::vector<ImageCorner> found = FindHiddenCorners(joined, {flank}, {}, options);
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_LT((found[0].point - hidden).norm(), 1e-6);
+  const std::array<int, 2> pair = {std::min(found[0].segments[0], found[0].segments[1]),
+                                   std::max(found[0].segments[0], found[0].segments[1])};
+  EXPECT_EQ(pair, (std::array<int, 2>{0, 1}));
+  // The arms reach the edges' far ends.
+  for (int k = 0; k < 2; ++k) {
+    const ImageLine& own = lines[static_cast<size_t>(found[0].segments[static_cast<size_t>(k)])];
+    EXPECT_LT((found[0].arm_end[static_cast<size_t>(k)] - own.a).norm(), 1e-9);
+  }
+  // No contour, or the pair already an image corner: none.
+  EXPECT_TRUE(FindHiddenCorners(joined, {}, {}, options).empty());
+  ImageCorner known;
+  known.segments = {1, 0};
+  EXPECT_TRUE(FindHiddenCorners(joined, {flank}, {known}, options).empty());
+  // The corner is 33 px beyond line 0's end and 45 px beyond line 1's: not within 44 px, within 46.
+  options.hidden_corner_max_gap_px = 44;
+  EXPECT_TRUE(FindHiddenCorners(joined, {flank}, {}, options).empty());
+  options.hidden_corner_max_gap_px = 46;
+  EXPECT_EQ(FindHiddenCorners(joined, {flank}, {}, options).size(), 1u);
+  // Line 4 (its line meets the flank 21 px on) joins when the reach is 22 px: it meets 0 and 1 there.
+  options.hidden_corner_max_gap_px = 120;
+  options.hidden_corner_reach_px = 22;
+  EXPECT_EQ(FindHiddenCorners(joined, {flank}, {}, options).size(), 3u);
 }
 
 }  // namespace

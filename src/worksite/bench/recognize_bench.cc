@@ -557,6 +557,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "no-across-beside") return o->contour_across_beside = false, std::nullopt;
   if (a == "no-sides-bounded") return o->contour_sides_bounded = false, std::nullopt;
   if (a == "no-support-pole-ends") return o->support_pole_ends = false, std::nullopt;
+  if (a == "no-hidden-corners") return o->support_hidden_corners = false, std::nullopt;
   if (a == "no-rescue") return o->matched_share_rescue = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
   // NAME-VALUE at the first dash (no NAME below holds one), so that a negative VALUE ("tightfit--1")
@@ -581,6 +582,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"queries", [o](double v) { o->max_index_queries = static_cast<int>(v); }},
       {"seglen", [o](double v) { o->min_segment_length_px = v; }},
       {"junction", [o](double v) { o->junction_gap_px = v; }},
+      {"hcreach", [o](double v) { o->hidden_corner_reach_px = v; }},
+      {"hcgap", [o](double v) { o->hidden_corner_max_gap_px = v; }},
       {"supportmin", [o](double v) { o->support_min_score = v; }},
       {"cornerridge", [o](double v) { o->support_corner_ridge_share = v; }},
       {"cornerridgegrey", [o](double v) { o->support_corner_ridge_grey = v; }},

@@ -377,6 +377,14 @@ JoinedLines JoinCollinearLines(const std::vector<ImageLine>& lines);
 // The same from the lines already joined (JoinCollinearLines(lines)): one join serves both
 // FindCorners and OccludingContours.
 std::vector<ImageCorner> FindCorners(const JoinedLines& joined, const RecognizerOptions& options);
+// Corners hidden behind an occluding contour (RecognizerOptions::support_hidden_corners): two joined
+// edges (representatives of `joined`) that each run into a contour (their line meets it within
+// options.hidden_corner_reach_px of the edge's end, at 15 deg or more) and whose lines meet beyond
+// both those ends, at most options.hidden_corner_max_gap_px on, at 20 deg or more. Pairs that are
+// already one of `corners` are left out. The arms reach the edges' far ends.
+std::vector<ImageCorner> FindHiddenCorners(const JoinedLines& joined, const std::vector<ImageLine>& contours,
+                                           const std::vector<ImageCorner>& corners,
+                                           const RecognizerOptions& options);
 // Occluding contours (contours.cc, RecognizerOptions::occlusion_contours): the image's straight
 // edges of at least options.contour_min_length_px, collinear pieces joined (JoinCollinearLines),
 // with a median grey-level step across them of at least options.contour_min_step_grey (a wood

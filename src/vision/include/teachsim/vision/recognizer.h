@@ -233,6 +233,14 @@ struct RecognizerOptions {
   // images), against off: one false detection fewer (185 -> 184), every found block the same; the dev set
   // unchanged (docs/benchmarks.md, session 54).
   bool contour_sides_bounded = true;
+  // The support-plane source also takes corners hidden behind an occluding contour
+  // (FindHiddenCorners): two edges that run into contours and whose lines meet beyond them. Render
+  // seeds 7-22 (960 images, where it was made), against off: found 0.4-0.7 visible 126 -> 127, the
+  // rest and the false detections the same; held out, seeds 23-71: 0.4-0.7 411 -> 414, < 0.4 51 -> 52,
+  // >= 0.7 the same, false detections 153 -> 151 (docs/benchmarks.md, session 67).
+  bool support_hidden_corners = true;
+  double hidden_corner_reach_px = 4;      // an edge's end this close to the contour it runs into, px
+  double hidden_corner_max_gap_px = 120;  // the corner at most this far beyond each edge's end, px
   double contour_min_length_px = 60;
   double contour_min_step_grey = 30;
   double contour_max_hidden_coverage = 0.3;
