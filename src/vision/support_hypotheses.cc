@@ -328,12 +328,12 @@ std::vector<ImageCorner> FindHiddenCorners(const JoinedLines& joined, const std:
                                            const std::vector<ImageCorner>& corners,
                                            const RecognizerOptions& options) {
   TEACHSIM_CHECK(joined.extent.size() == joined.representative.size());
-  const double kAtContourPx = options.hidden_corner_reach_px, kMaxGapPx = options.hidden_corner_max_gap_px;
+  const double reach_px = options.hidden_corner_reach_px, max_gap_px = options.hidden_corner_max_gap_px;
   constexpr double kMinSinAngle = 0.34;  // 20 deg
   // The joined edges with an end at a contour that they run into (at 15 deg or more to it): the
-  // edge's line, continued past that end, crosses the contour within kAtContourPx of the end.
+  // edge's line, continued past that end, crosses the contour within reach_px of the end.
   struct EndAtContour {
-    int line = 0, end = 0;
+    int line = 0;
     Eigen::Vector2d at, far, direction;  // the end, the other end, unit from far to at
   };
   std::vector<EndAtContour> ends;
@@ -353,10 +353,10 @@ std::vector<ImageCorner> FindHiddenCorners(const JoinedLines& joined, const std:
         if (std::abs(across) < 0.26) continue;  // within 15 deg of the contour: not into it
         // Where the edge's line meets the contour's, along the edge from its end (px).
         const double t = -n.dot(at - contour.a) / across;
-        if (t < -kAtContourPx || t > kAtContourPx) continue;
+        if (t < -reach_px || t > reach_px) continue;
         const double s = c.dot(at + t * d - contour.a);
-        if (s < -kAtContourPx || s > contour_length + kAtContourPx) continue;
-        ends.push_back({static_cast<int>(l), end, at, far, d});
+        if (s < -reach_px || s > contour_length + reach_px) continue;
+        ends.push_back({static_cast<int>(l), at, far, d});
         break;
       }
     }
@@ -373,7 +373,7 @@ std::vector<ImageCorner> FindHiddenCorners(const JoinedLines& joined, const std:
       const Eigen::Vector2d w = q.at - p.at;
       const double u = (w.x() * q.direction.y() - w.y() * q.direction.x()) / cross;
       const double v = (w.x() * p.direction.y() - w.y() * p.direction.x()) / cross;
-      if (u <= kAtContourPx || v <= kAtContourPx || u > kMaxGapPx || v > kMaxGapPx) continue;
+      if (u <= reach_px || v <= reach_px || u > max_gap_px || v > max_gap_px) continue;
       bool known = false;
       for (const ImageCorner& c : corners) {
         known = known || (c.segments[0] == p.line && c.segments[1] == q.line) ||
