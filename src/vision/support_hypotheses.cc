@@ -367,12 +367,12 @@ std::vector<ImageCorner> FindHiddenCorners(const JoinedLines& joined, const std:
       const EndAtContour& p = ends[x];
       const EndAtContour& q = ends[y];
       if (p.line == q.line) continue;
-      const double cross = p.direction.x() * q.direction.y() - p.direction.y() * q.direction.x();
+      const double cross = Cross2(p.direction, q.direction);
       if (std::abs(cross) < kMinSinAngle) continue;
       // p.at + u p.direction = q.at + v q.direction, both beyond the ends.
       const Eigen::Vector2d w = q.at - p.at;
-      const double u = (w.x() * q.direction.y() - w.y() * q.direction.x()) / cross;
-      const double v = (w.x() * p.direction.y() - w.y() * p.direction.x()) / cross;
+      const double u = Cross2(w, q.direction) / cross;
+      const double v = Cross2(w, p.direction) / cross;
       if (u <= reach_px || v <= reach_px || u > max_gap_px || v > max_gap_px) continue;
       bool known = false;
       for (const ImageCorner& c : corners) {
