@@ -75,8 +75,9 @@ class Camera {
   Eigen::Vector2d Distort(const Eigen::Vector2d& normalized) const;
   Eigen::Matrix2d DistortJacobian(const Eigen::Vector2d& normalized) const;
   // The inverse: Gauss-Newton on Distort(), seeded with OpenCV's fixed-point step; agrees with
-  // cv::undistortPoints run to convergence. nullopt when it does not converge (a point far outside
-  // the field of view, where the polynomial model folds over).
+  // cv::undistortPoints run to convergence. Without tangential terms (p1 = p2 = 0) the same root is
+  // found along the point's radius, a 1-D Newton. nullopt when it does not converge (a point far
+  // outside the field of view, where the polynomial model folds over).
   std::optional<Eigen::Vector2d> Undistort(const Eigen::Vector2d& distorted) const;
   // The same, with Newton started at `start` (the answer for a nearby point: scanning an image).
   std::optional<Eigen::Vector2d> Undistort(const Eigen::Vector2d& distorted,
