@@ -143,9 +143,9 @@ namespace {
 // residual |f(r) - |distorted|| is the 2-D residual's size; the 2-D Jacobian's determinant is
 // radial * f'(r)) for less than half the time (docs/benchmarks.md, `bench render`): the renderer
 // undistorts every sample of every image, the line stage every edge point.
+// `rd`: |distorted|, which both callers have already.
 std::optional<Eigen::Vector2d> UndistortRadial(const Distortion& d, const Eigen::Vector2d& distorted,
-                                               double r_start) {
-  const double rd = distorted.norm();
+                                               double rd, double r_start) {
   if (rd == 0) return distorted;
   double r = std::isfinite(r_start) ? r_start : rd;
   double radial = 1, slope = 1;
@@ -182,7 +182,7 @@ std::optional<Eigen::Vector2d> Camera::Undistort(const Eigen::Vector2d& distorte
       if (!(radial > 0)) break;
       r = rd / radial;
     }
-    return UndistortRadial(d, distorted, r);
+    return UndistortRadial(d, distorted, rd, r);
   }
   // OpenCV's fixed-point iteration (cvUndistortPointsInternal) for a start near the right branch.
   Eigen::Vector2d n = distorted;
@@ -203,7 +203,7 @@ std::optional<Eigen::Vector2d> Camera::Undistort(const Eigen::Vector2d& distorte
   if (distortion_.IsZero()) return distorted;
   if (distortion_.p1 == 0 && distortion_.p2 == 0) {
     const double rd = distorted.norm();
-    return UndistortRadial(distortion_, distorted, rd > 0 ? start.dot(distorted) / rd : 0);
+    return UndistortRadial(distortion_, distorted, rd, rd > 0 ? start.dot(distorted) / rd : 0);
   }
   Eigen::Vector2d n = start.allFinite() ? start : distorted;
   // Gauss-Newton (a square system: Newton) to full precision. The residual and derivative at the
