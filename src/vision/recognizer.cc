@@ -882,66 +882,6 @@ double EvidenceScore(const PoseEvidence& e) {
   return 1 / (1 + std::exp(-z));
 }
 
-namespace {
-
-// BoostedEvidenceScore's model: tools/fit_evidence_trees.py writes evidence_trees.inc.
-struct EvidenceTreeNode {
-  int feature;       // into EvidenceFeatures; -1: a leaf
-  double threshold;  // feature <= threshold: left, else right
-  int left, right;   // into kEvidenceTreeNodes
-  double value;      // a leaf's term of the sum (the learning rate applied)
-};
-struct EvidenceCalibrationPoint {
-  double margin, score;  // the trees' sum and the logistic score's value matched to it
-};
-#include "evidence_trees.inc"
-
-// The trees' features, in the tool's order (fit_evidence_trees.py, FEATURES).
-std::array<double, kEvidenceTreeFeatures> EvidenceFeatures(const PoseEvidence& e) {
-  return {e.matched_fraction,
-          e.support_fraction,
-          e.coverage,
-          std::min(e.rms_px, 4.0),
-          std::min(e.rms_closest_px, 4.0),
-          static_cast<double>(e.continued_ends),
-          static_cast<double>(e.long_continued_ends),
-          e.fixed_share,
-          e.free_support_fraction,
-          e.free_coverage,
-          e.polarity,
-          e.edges_supported / std::max(e.edges_visible, 1.0),
-          e.edges_visible,
-          e.edges_supported,
-          e.step_supported_px / std::max(e.supported_px, 1.0),
-          e.supported_px,
-          static_cast<double>(e.matches)};
-}
-
-}  // namespace
-
-double BoostedEvidenceScore(const PoseEvidence& e) {
-  const std::array<double, kEvidenceTreeFeatures> x = EvidenceFeatures(e);
-  double margin = kEvidenceTreeBase;
-  for (const int root : kEvidenceTreeRoots) {
-    int n = root;
-    while (kEvidenceTreeNodes[n].feature >= 0) {
-      const EvidenceTreeNode& node = kEvidenceTreeNodes[n];
-      n = x[static_cast<size_t>(node.feature)] <= node.threshold ? node.left : node.right;
-    }
-    margin += kEvidenceTreeNodes[n].value;
-  }
-  // Piecewise linear between the calibration's points (margins increasing), constant beyond them.
-  const EvidenceCalibrationPoint* begin = std::begin(kEvidenceCalibration);
-  const EvidenceCalibrationPoint* end = std::end(kEvidenceCalibration);
-  const EvidenceCalibrationPoint* above = std::lower_bound(
-      begin, end, margin, [](const EvidenceCalibrationPoint& p, double m) { return p.margin < m; });
-  if (above == begin) return begin->score;
-  if (above == end) return (end - 1)->score;
-  const EvidenceCalibrationPoint& below = *(above - 1);
-  return below.score +
-         (above->score - below.score) * (margin - below.margin) / (above->margin - below.margin);
-}
-
 geometry::Aabb ExtentOf(const std::vector<Eigen::Vector3d>& points) {
   TEACHSIM_CHECK(!points.empty());
   geometry::Aabb e;
@@ -1803,8 +1743,7 @@ void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
         ComputeEvidence(model, camera_, pose, detection_, &fixed_edges_, options_, set, &hiding);
     double rms_px = 0;
     const Outcome verdict = Judge(evidence, options_, &rms_px);
-    const double score =
-        options_.occlusion_boosted_score ? BoostedEvidenceScore(evidence) : EvidenceScore(evidence);
+    const double score = EvidenceScore(evidence);
     if (verdict != Outcome::kCandidate || score < min_score) {
       note(verdict != Outcome::kCandidate ? Second::kRules : Second::kScore, behind_contour, hidden, verdict,
            score, min_score);

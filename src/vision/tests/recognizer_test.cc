@@ -1432,66 +1432,6 @@ TEST(VerificationTest, TheEvidenceScoreSeparatesTheTruePoseFromWrongOnes) {
               truth, moved, crossing);
 }
 
-// The boosted trees' score tells the same poses apart where the occlusion pass uses it: the true pose
-// at the top of the scale, the wrong ones below the least score that pass asks
-// (contour_bare_min_evidence_score). It is less sure than EvidenceScore of the bar moved along
-// itself (0.53 against under 0.3): it was never asked to place that threshold.
-TEST(VerificationTest, TheBoostedScoreSeparatesTheTruePoseFromWrongOnes) {
-  const Camera camera = SyntheticCamera();
-  const geometry::Pose3 bar = OnTable(Bar().box_size_m, 0.02, -0.01, 0.4);
-  const cv::Mat image = RenderBoxes(camera, {{Bar().box_size_m, bar}}, 11);
-  const RecognizerOptions options;
-  const LineDetection detection = DetectLinesAndEdges(image, camera, options);
-  auto score = [&](const Model& model, const geometry::Pose3& world_T_object) {
-    return BoostedEvidenceScore(
-        EvaluatePose(model, camera, camera.camera_T_world() * world_T_object, detection, options));
-  };
-  const double truth = score(Bar(), bar);
-  EXPECT_GE(truth, options.occlusion_min_evidence_score);
-  geometry::Pose3 shifted = bar;
-  shifted.translation += bar.Rotate(Eigen::Vector3d(0.25 * Bar().box_size_m.x(), 0, 0));
-  const double least_asked =
-      std::min(options.occlusion_min_evidence_score, options.contour_bare_min_evidence_score);
-  const double moved = score(Bar(), shifted);
-  EXPECT_LT(moved, least_asked);
-  const double crossing = score(Bar(), OnTable(Bar().box_size_m, 0.02, -0.01, 0.4 + M_PI / 2));
-  EXPECT_LT(crossing, least_asked);
-  std::printf("boosted score: true pose %.3f, moved by a quarter of its length %.3f, turned 90 deg %.3f\n",
-              truth, moved, crossing);
-}
-
-// The boosted score is a number in [0, 1] for any evidence, however odd (the calibration holds it
-// constant beyond its ends): 20,000 random evidences, fields from 0 to beyond their ranges. Full
-// evidence scores at the top of the scale, none at the bottom.
-TEST(VerificationTest, TheBoostedScoreStaysOnItsScale) {
-  std::mt19937 rng(69);
-  std::uniform_real_distribution<double> unit(0, 1.2), px(0, 3000), count(0, 14);
-  for (int i = 0; i < 20000; ++i) {
-    PoseEvidence e;
-    e.matched_fraction = unit(rng), e.support_fraction = unit(rng), e.coverage = unit(rng);
-    e.supported_px = px(rng), e.step_supported_px = px(rng), e.free_supported_px = px(rng);
-    e.rms_px = 5 * unit(rng), e.rms_closest_px = 5 * unit(rng);
-    e.matches = static_cast<int>(count(rng)), e.continued_ends = static_cast<int>(count(rng) / 2);
-    e.long_continued_ends = static_cast<int>(count(rng) / 3);
-    e.fixed_share = unit(rng), e.free_support_fraction = unit(rng), e.free_coverage = unit(rng);
-    e.polarity = unit(rng), e.edges_visible = std::floor(count(rng)),
-    e.edges_supported = std::floor(count(rng));
-    const double s = BoostedEvidenceScore(e);
-    ASSERT_TRUE(std::isfinite(s)) << i;
-    ASSERT_GE(s, 0) << i;
-    ASSERT_LE(s, 1) << i;
-  }
-  PoseEvidence full;
-  full.matched_fraction = 0.9, full.support_fraction = 1, full.coverage = 0.95, full.supported_px = 400;
-  full.step_supported_px = 400, full.rms_px = full.rms_closest_px = 0.3, full.matches = 9;
-  full.free_support_fraction = 1, full.free_coverage = 0.95, full.free_supported_px = 400, full.polarity = 1;
-  full.edges_visible = full.edges_supported = 9;
-  EXPECT_GE(BoostedEvidenceScore(full), 0.98);
-  PoseEvidence none;
-  none.edges_visible = 9, none.rms_px = none.rms_closest_px = 4;
-  EXPECT_LT(BoostedEvidenceScore(none), 0.01);
-}
-
 // The evidence samples only the outline in the camera's view (Camera::SegmentInView). With a lens
 // that folds (k1 = -0.4), a bar 60 deg off the axis "projects" mirrored into the picture, onto a
 // checkerboard's edges: it must gather no evidence there. And a bar with a corner 0.1 mm in front of

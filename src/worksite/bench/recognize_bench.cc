@@ -43,8 +43,7 @@
 // included) and matchedinimage-X (the share of the outline inside the image from which the matched
 // share is of that part only), no-rescue and rescue-X (poses short of the matched share turned down
 // unjudged; the evidence score that accepts them), no-occlusion (no second judgement of poses that
-// accepted recognitions partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits),
-// logistic-occlusion (that pass judges by vision::EvidenceScore, not BoostedEvidenceScore), no-contours
+// accepted recognitions partly hide), hiddenmin-X, shownmin-X and hiddenscore-X (its limits), no-contours
 // (no occluding contours: vision::RecognizerOptions::occlusion_contours), no-pole-ends (no strips
 // between flanks that end inside a pose's image: contour_pole_ends; no-pole-tops: such strips end
 // with their flanks, contour_pole_tops; no-support-pole-ends: not in the support-plane source,
@@ -560,7 +559,6 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
   if (a == "no-support-pole-ends") return o->support_pole_ends = false, std::nullopt;
   if (a == "no-hidden-corners") return o->support_hidden_corners = false, std::nullopt;
   if (a == "no-rescue") return o->matched_share_rescue = false, std::nullopt;
-  if (a == "logistic-occlusion") return o->occlusion_boosted_score = false, std::nullopt;
   if (a == "rules-only") return o->min_evidence_score = 0, o->accept_evidence_score = 1, std::nullopt;
   // NAME-VALUE at the first dash (no NAME below holds one), so that a negative VALUE ("tightfit--1")
   // reaches Validate and its message.
@@ -638,7 +636,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
     return "unknown ablation (no-support, plane-only, no-polish, no-refit, skip-any-claim, "
            "matched-whole-edges, no-occlusion, no-contours, no-pole-ends, no-pole-tops, no-across-beside, "
            "no-sides-bounded, no-support-pole-ends, no-rescue, "
-           "logistic-occlusion, rescue-X, "
+           "rescue-X, "
            "rules-only, index-N, "
            "support-N, contourreserve-N, "
            "contrast-X, "

@@ -690,13 +690,6 @@ PoseEvidence EvaluateOutline(const Model& model, const Camera& camera, const geo
 // its rules with a score >= RecognizerOptions::min_evidence_score, or any pose with a score >=
 // RecognizerOptions::accept_evidence_score.
 double EvidenceScore(const PoseEvidence& evidence);
-// The same on the same scale from boosted decision trees over the evidence's fields (60 trees of
-// depth 3, fitted by tools/fit_evidence_trees.py on the hypotheses of render seeds 7-22), mapped
-// onto EvidenceScore's scale by the false hypotheses' ranks on seeds 23-38: above any threshold, as
-// many false hypotheses of those seeds pass it as pass EvidenceScore, and more true ones (at 0.98,
-// 2758 of 3301 against 2625). The occlusion pass judges by it
-// (RecognizerOptions::occlusion_boosted_score).
-double BoostedEvidenceScore(const PoseEvidence& evidence);
 // The selection's rank of a pose: its supported length where the grey level steps across the edge,
 // less its unsupported outline (step_supported_px * (2 - 1 / coverage)).
 double NetSupportPx(const PoseEvidence& evidence);

@@ -177,11 +177,6 @@ struct RecognizerOptions {
   double occlusion_min_hidden_share = 0.1;
   double occlusion_min_shown_share = 0.4;
   double occlusion_min_evidence_score = 0.98;
-  // The occlusion pass's evidence score: BoostedEvidenceScore (trees over the evidence's fields, on
-  // EvidenceScore's scale), or EvidenceScore (off). Fresh render seeds 39-87 against off: found
-  // >= 0.7 / 0.4-0.7 / < 0.4 +4 / +15 / 0, false detections +2 (164 -> 166 in 2,940 images); the
-  // dev set the same (docs/benchmarks.md, session 69).
-  bool occlusion_boosted_score = true;
   // Blocks partly hidden by something the library does not hold (an arm, a hand, a tool; the
   // benchmark's dark cylinder): occluding contours, image lines of at least contour_min_length_px
   // (collinear pieces joined) with a median grey-level step of at least contour_min_step_grey across
