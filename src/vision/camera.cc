@@ -172,7 +172,7 @@ std::optional<Eigen::Vector2d> UndistortRadial(const Distortion& d, const Eigen:
 std::optional<Eigen::Vector2d> Camera::Undistort(const Eigen::Vector2d& distorted) const {
   if (distortion_.IsZero()) return distorted;
   const Distortion& d = distortion_;
-  if (d.p1 == 0 && d.p2 == 0) {
+  if (d.IsRadial()) {
     // OpenCV's fixed-point iteration, as below, on the radius alone.
     const double rd = distorted.norm();
     double r = rd;
@@ -201,7 +201,7 @@ std::optional<Eigen::Vector2d> Camera::Undistort(const Eigen::Vector2d& distorte
 std::optional<Eigen::Vector2d> Camera::Undistort(const Eigen::Vector2d& distorted,
                                                  const Eigen::Vector2d& start) const {
   if (distortion_.IsZero()) return distorted;
-  if (distortion_.p1 == 0 && distortion_.p2 == 0) {
+  if (distortion_.IsRadial()) {
     const double rd = distorted.norm();
     return UndistortRadial(distortion_, distorted, rd, rd > 0 ? start.dot(distorted) / rd : 0);
   }

@@ -29,6 +29,8 @@ struct Intrinsics {
 struct Distortion {
   double k1 = 0, k2 = 0, p1 = 0, p2 = 0, k3 = 0;
   bool IsZero() const { return k1 == 0 && k2 == 0 && p1 == 0 && p2 == 0 && k3 == 0; }
+  // No tangential terms: each point moves along its own radius (Camera::Undistort's 1-D path).
+  bool IsRadial() const { return p1 == 0 && p2 == 0; }
 };
 
 // A ray in the world: origin at the camera centre, unit direction.
