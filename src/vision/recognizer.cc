@@ -100,6 +100,8 @@ Status RecognizerOptions::Validate() const {
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_tie_rank_share", conflict_tie_rank_share));
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_rms_ratio", conflict_rms_ratio));
   TEACHSIM_RETURN_IF_ERROR(fraction("conflict_score_lead", conflict_score_lead));
+  TEACHSIM_RETURN_IF_ERROR(fraction("conflict_bare_table_share", conflict_bare_table_share));
+  TEACHSIM_RETURN_IF_ERROR(fraction("max_bare_table_share", max_bare_table_share));
   TEACHSIM_RETURN_IF_ERROR(non_negative("max_alternative_fits", max_alternative_fits, " (0: none)"));
   if (!(support_tight_fit_shift_px >= 0) || !std::isfinite(support_tight_fit_shift_px)) {
     return Status::InvalidInput(
@@ -818,8 +820,162 @@ std::vector<size_t> ExplainedAway(const std::vector<std::pair<const Model*, geom
   return dropped;
 }
 
-bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival,
-                   const RecognizerOptions& options) {
+// At least this many points (2 px apart) of bare table make a claim bare: a sliver along another
+// recognition's image is not one.
+constexpr int kMinBarePoints = 10;
+
+int TableGrey(const EdgeMap& edge_map) {
+  const cv::Mat& grey = edge_map.smoothed;
+  std::array<int, 256> histogram{};
+  int total = 0;
+  for (int y = 0; y < grey.rows; y += 2) {
+    const uint8_t* row = grey.ptr<uint8_t>(y);
+    for (int x = 0; x < grey.cols; x += 2) ++histogram[row[x]], ++total;
+  }
+  for (int v = 0, below = 0; v < 256; ++v) {
+    below += histogram[static_cast<size_t>(v)];
+    if (2 * below >= total) return v;
+  }
+  return 0;
+}
+
+namespace {
+
+// A box's image as the pin-hole camera sees it: the convex hull of its corners' projections, its
+// corners in the order that makes every turn and the shoelace area positive (Cross2), with its
+// bounding box.
+struct BoxImageHull {
+  std::vector<Eigen::Vector2d> corners;
+  Eigen::Vector2d lo, hi;
+  // How far `q` lies inside (> 0) or outside (< 0): exact inside; outside, at most the distance.
+  double Depth(const Eigen::Vector2d& q) const {
+    double depth = std::numeric_limits<double>::infinity();
+    for (size_t i = 0; i < corners.size(); ++i) {
+      const Eigen::Vector2d& a = corners[i];
+      const Eigen::Vector2d e = corners[(i + 1) % corners.size()] - a;
+      depth = std::min(depth, Cross2(e, q - a) / e.norm());
+    }
+    return depth;
+  }
+  // Whether `q` lies at least margin_px inside.
+  bool HoldsDeep(const Eigen::Vector2d& q, double margin_px) const {
+    if ((q.array() < lo.array() + margin_px).any() || (q.array() > hi.array() - margin_px).any())
+      return false;
+    return Depth(q) >= margin_px;
+  }
+  // Whether `q` lies less than margin_px outside (or inside).
+  bool Reaches(const Eigen::Vector2d& q, double margin_px) const {
+    if ((q.array() < lo.array() - margin_px).any() || (q.array() > hi.array() + margin_px).any())
+      return false;
+    return Depth(q) > -margin_px;
+  }
+};
+std::optional<BoxImageHull> ImageHullOf(const Model& model, const geometry::Pose3& camera_T_object,
+                                        const Eigen::Matrix3d& K) {
+  std::array<Eigen::Vector2d, 8> px;
+  for (int v = 0; v < 8; ++v) {
+    const Eigen::Vector3d p = camera_T_object * BoxVertex(model.box_size_m, v);
+    if (!(p.z() > 1e-3)) return std::nullopt;
+    px[static_cast<size_t>(v)] = (K * p).hnormalized();
+  }
+  // Andrew's monotone chain: one chain along increasing x, then one back, each turn Cross2 > 0,
+  // which keeps the inside where Depth() takes it.
+  std::sort(px.begin(), px.end(), [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return a.x() != b.x() ? a.x() < b.x() : a.y() < b.y();
+  });
+  BoxImageHull out;
+  std::vector<Eigen::Vector2d>& hull = out.corners;
+  for (int pass = 0; pass < 2; ++pass) {
+    const size_t start = hull.size();
+    for (size_t k = 0; k < px.size(); ++k) {
+      const Eigen::Vector2d& q = pass == 0 ? px[k] : px[px.size() - 1 - k];
+      while (hull.size() >= start + 2 &&
+             Cross2(hull[hull.size() - 1] - hull[hull.size() - 2], q - hull[hull.size() - 2]) <= 0)
+        hull.pop_back();
+      hull.push_back(q);
+    }
+    hull.pop_back();  // each chain's last point starts the other
+  }
+  double area = 0;
+  for (size_t i = 0; i < hull.size(); ++i) area += Cross2(hull[i], hull[(i + 1) % hull.size()]);
+  if (hull.size() < 3 || area < 1) return std::nullopt;
+  out.lo = out.hi = out.corners.front();
+  for (const Eigen::Vector2d& q : out.corners) out.lo = out.lo.cwiseMin(q), out.hi = out.hi.cwiseMax(q);
+  return out;
+}
+
+}  // namespace
+
+ClaimedAlone BareTableBeyond(const Model& model, const geometry::Pose3& camera_T_object,
+                             const std::vector<std::pair<const Model*, geometry::Pose3>>& others,
+                             const Camera& camera, const EdgeMap& edge_map, int table_grey) {
+  constexpr double kStepPx = 2, kMarginPx = 4;
+  constexpr int kGreyTolerance = 15;
+  ClaimedAlone out;
+  const Eigen::Matrix3d K = camera.K();
+  const std::optional<BoxImageHull> own = ImageHullOf(model, camera_T_object, K);
+  if (!own) return out;
+  std::vector<BoxImageHull> elsewhere;
+  for (const auto& [m, pose] : others) {
+    std::optional<BoxImageHull> hull = ImageHullOf(*m, pose, K);
+    if (!hull) return out;  // one reaches behind the camera: what the pose claims alone is not known
+    elsewhere.push_back(std::move(*hull));
+  }
+  const cv::Mat& grey = edge_map.smoothed;
+  for (double y = own->lo.y() + kMarginPx; y <= own->hi.y() - kMarginPx; y += kStepPx) {
+    for (double x = own->lo.x() + kMarginPx; x <= own->hi.x() - kMarginPx; x += kStepPx) {
+      const Eigen::Vector2d q(x, y);
+      if (!own->HoldsDeep(q, kMarginPx)) continue;
+      bool claimed = false;
+      for (const BoxImageHull& o : elsewhere) claimed = claimed || o.Reaches(q, kMarginPx);
+      if (claimed) continue;
+      const Eigen::Vector2d at = camera.DistortPixel(q);
+      const int px = NearestPixel(at.x(), grey.cols), py = NearestPixel(at.y(), grey.rows);
+      if (px < 0 || py < 0) continue;
+      ++out.samples;
+      if (NoEdgeNear(edge_map, at) && std::abs(grey.ptr<uint8_t>(py)[px] - table_grey) <= kGreyTolerance) {
+        ++out.bare;
+      }
+    }
+  }
+  return out;
+}
+
+std::vector<size_t> StandingOnBareTable(
+    const std::vector<std::pair<const Model*, geometry::Pose3>>& recognitions, const Camera& camera,
+    const EdgeMap& edge_map, int table_grey, double share) {
+  std::vector<size_t> dropped;
+  if (share <= 0) return dropped;
+  std::vector<size_t> kept(recognitions.size());
+  for (size_t k = 0; k < kept.size(); ++k) kept[k] = k;
+  std::vector<std::pair<const Model*, geometry::Pose3>> others;
+  while (!kept.empty()) {
+    double barest = -1;
+    size_t barest_at = 0;
+    for (size_t k = 0; k < kept.size(); ++k) {
+      others.clear();
+      for (size_t j : kept) {
+        if (j != kept[k]) others.push_back(recognitions[j]);
+      }
+      const auto& [model, camera_T_object] = recognitions[kept[k]];
+      const ClaimedAlone alone =
+          BareTableBeyond(*model, camera_T_object, others, camera, edge_map, table_grey);
+      if (alone.bare < kMinBarePoints) continue;
+      const double bare_share = static_cast<double>(alone.bare) / alone.samples;
+      if (bare_share >= share && bare_share > barest) barest = bare_share, barest_at = k;
+    }
+    if (barest < 0) break;
+    dropped.push_back(kept[barest_at]);
+    kept.erase(kept.begin() + static_cast<std::ptrdiff_t>(barest_at));
+  }
+  return dropped;
+}
+
+namespace {
+
+// The pairwise decision on the two outlines alone (ReplacesRival before the bare table is weighed).
+bool ReplacesOnOutline(const PairwiseSide& candidate, const PairwiseSide& rival,
+                       const RecognizerOptions& options) {
   const int margin = options.conflict_balance_margin;
   if (margin <= 0) return false;
   if (candidate.own >= margin) {
@@ -840,6 +996,18 @@ bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival,
          std::abs(rival.own) < margin &&
          candidate.in_image >= rival.in_image + options.conflict_in_image_lead &&
          candidate.rank >= options.conflict_tie_rank_share * rival.rank;
+}
+
+}  // namespace
+
+bool ReplacesRival(const PairwiseSide& candidate, const PairwiseSide& rival,
+                   const RecognizerOptions& options) {
+  const bool on_outline = ReplacesOnOutline(candidate, rival, options);
+  const double share = options.conflict_bare_table_share;
+  if (share <= 0) return on_outline;
+  auto bare = [&](const ClaimedAlone& a) { return a.bare >= kMinBarePoints && a.bare >= share * a.samples; };
+  if (on_outline) return !bare(candidate.alone);
+  return bare(rival.alone) && candidate.alone.bare <= share / 3 * candidate.alone.samples;
 }
 
 bool WithinBox(const Model& outer, const geometry::Pose3& camera_T_outer, const Model& inner,
@@ -1223,9 +1391,14 @@ class RecognitionPass {
   // found here when null.
   void ReverifyOccluded(std::vector<size_t>* accepted_io, const std::vector<ImageLine>* contours);
 
+  // RecognizerOptions::max_bare_table_share: drops the accepted recognitions that stand on bare
+  // table, one at a time, the barest first, each judged against the others still accepted.
+  std::vector<size_t> WithoutBareClaims(std::vector<size_t> accepted);
+
   const std::vector<Candidate>& candidates() const { return candidates_; }
 
  private:
+  int table_grey_ = -1;  // TableGrey, worked out when the selection first needs it
   // Whether an initial pose like this one (1 cm, 8 degrees up to the model's symmetry) was fitted;
   // remembers it.
   bool AlreadyTried(int model_index, const geometry::Pose3& initial);
@@ -1631,6 +1804,14 @@ std::vector<size_t> RecognitionPass::Select(const std::vector<ImageLine>* contou
                          .rms_px = a.rms_px,
                          .score = a.rank_score,
                          .model = a.model};
+      if (options_.conflict_bare_table_share > 0) {
+        // What each claims alone, the other accepted recognitions' images left out of both.
+        if (table_grey_ < 0) table_grey_ = TableGrey(detection_.edge_map);
+        rival.alone =
+            BareTableBeyond(ma, a.camera_T_object, others, camera_, detection_.edge_map, table_grey_);
+        others.front() = {&ma, a.camera_T_object};
+        own.alone = BareTableBeyond(mc, c.camera_T_object, others, camera_, detection_.edge_map, table_grey_);
+      }
       if (ReplacesRival(own, rival, options_)) accepted[conflicts[0]] = i;
     }
   }
@@ -1646,6 +1827,24 @@ std::vector<size_t> RecognitionPass::WithoutExplainedAway(std::vector<size_t> ac
   }
   const std::vector<size_t> dropped =
       ExplainedAway(recognitions, camera_, detection_.edge_map, fixed_edges_, options_);
+  if (dropped.empty()) return accepted;
+  std::vector<size_t> kept;
+  for (size_t k = 0; k < accepted.size(); ++k) {
+    if (std::find(dropped.begin(), dropped.end(), k) == dropped.end()) kept.push_back(accepted[k]);
+  }
+  return SupportedSubset(kept);  // what rested on a dropped one no longer stands
+}
+
+std::vector<size_t> RecognitionPass::WithoutBareClaims(std::vector<size_t> accepted) {
+  if (options_.max_bare_table_share <= 0 || accepted.empty()) return accepted;
+  if (table_grey_ < 0) table_grey_ = TableGrey(detection_.edge_map);
+  std::vector<std::pair<const Model*, geometry::Pose3>> recognitions;
+  for (size_t i : accepted) {
+    const Candidate& c = candidates_[i];
+    recognitions.push_back({&models_.models[static_cast<size_t>(c.model)], c.camera_T_object});
+  }
+  const std::vector<size_t> dropped = StandingOnBareTable(recognitions, camera_, detection_.edge_map,
+                                                          table_grey_, options_.max_bare_table_share);
   if (dropped.empty()) return accepted;
   std::vector<size_t> kept;
   for (size_t k = 0; k < accepted.size(); ++k) {
@@ -1952,6 +2151,7 @@ Result<RecognitionResult> Recognizer::Recognize(const cv::Mat& image_gray8, cons
   std::vector<size_t> accepted = pass.Select(contours_found ? &contours : nullptr);
   const auto t_occlusion = Clock::now();
   pass.ReverifyOccluded(&accepted, contours_found ? &contours : nullptr);
+  accepted = pass.WithoutBareClaims(std::move(accepted));
   const double occlusion_ms = Ms(t_occlusion, Clock::now());
 
   // 6. the accepted candidates as recognitions in the world frame, then the model editor's rules (§4.3).

@@ -1222,6 +1222,98 @@ TEST(SelectionTest, WhatTheRightModelPredictsAloneIsInTheImage) {
   }
 }
 
+// What a pose claims alone (BareTableBeyond): in the image of a cube, a bar laid over it and on past
+// it claims the bare table beyond the cube, and the cube claims nothing the bar does not; in the
+// image of a bar, the bar's other half, which a cube on its one end leaves out, is the bar's lit faces,
+// not the table. Another accepted recognition's image is nobody's claim, and TableGrey is the
+// table's grey.
+TEST(SelectionTest, WhatAWrongModelClaimsAloneIsTheBareTable) {
+  const Camera camera = SyntheticCamera();
+  const RecognizerOptions options;
+  const Model bar_model = Bar(), cube_model = Cube();
+  const geometry::Pose3 camera_T_world = camera.camera_T_world();
+  for (const double yaw : {-0.3, 0.45, 1.2}) {
+    const geometry::Pose3 bar = OnTable(Bar().box_size_m, 0.03, -0.02, yaw);
+    geometry::Pose3 cube = bar;  // on the bar's +x end
+    cube.translation = bar * Eigen::Vector3d(0.0225, 0, 0);
+    const LineDetection cube_image =
+        DetectLinesAndEdges(RenderBoxes(camera, {{Cube().box_size_m, cube}}, 13), camera, options);
+    const int table = TableGrey(cube_image.edge_map);
+    EXPECT_NEAR(table, 90, 3) << "yaw " << yaw;  // RenderBoxes' table
+    const ClaimedAlone bar_alone =
+        BareTableBeyond(bar_model, camera_T_world * bar, {{&cube_model, camera_T_world * cube}}, camera,
+                        cube_image.edge_map, table);
+    const ClaimedAlone cube_alone =
+        BareTableBeyond(cube_model, camera_T_world * cube, {{&bar_model, camera_T_world * bar}}, camera,
+                        cube_image.edge_map, table);
+    EXPECT_GE(bar_alone.samples, 100) << "yaw " << yaw;
+    EXPECT_GE(bar_alone.bare, 0.9 * bar_alone.samples) << "yaw " << yaw;
+    EXPECT_EQ(cube_alone.samples, 0) << "yaw " << yaw;
+
+    const LineDetection bar_image =
+        DetectLinesAndEdges(RenderBoxes(camera, {{Bar().box_size_m, bar}}, 13), camera, options);
+    const ClaimedAlone bar_half =
+        BareTableBeyond(bar_model, camera_T_world * bar, {{&cube_model, camera_T_world * cube}}, camera,
+                        bar_image.edge_map, TableGrey(bar_image.edge_map));
+    EXPECT_GE(bar_half.samples, 100) << "yaw " << yaw;
+    EXPECT_EQ(bar_half.bare, 0) << "yaw " << yaw;
+
+    // The cube's image recognized as well, as a third recognition: the bar claims nothing there, and
+    // the table beyond the cube is still its own claim.
+    geometry::Pose3 far_end = bar;
+    far_end.translation = bar * Eigen::Vector3d(-0.0225, 0, 0);
+    const ClaimedAlone beside_other =
+        BareTableBeyond(bar_model, camera_T_world * bar,
+                        {{&cube_model, camera_T_world * cube}, {&cube_model, camera_T_world * far_end}},
+                        camera, cube_image.edge_map, table);
+    EXPECT_EQ(beside_other.samples, 0) << "yaw " << yaw;
+    std::printf("yaw %.2f: the bar over a cube claims %d of %d points bare; the bar's own half %d of %d\n",
+                yaw, bar_alone.bare, bar_alone.samples, bar_half.bare, bar_half.samples);
+  }
+  // A box reaching behind the camera claims nothing, nor does one beside it.
+  geometry::Pose3 behind = camera_T_world * OnTable(Bar().box_size_m, 0.03, -0.02, 0);
+  behind.translation.z() = 0.01;
+  const LineDetection empty = DetectLinesAndEdges(RenderBoxes(camera, {}, 13), camera, options);
+  const geometry::Pose3 ahead = camera_T_world * OnTable(Cube().box_size_m, 0.03, -0.02, 0);
+  EXPECT_EQ(BareTableBeyond(bar_model, behind, {{&cube_model, ahead}}, camera, empty.edge_map, 90).samples,
+            0);
+  EXPECT_EQ(BareTableBeyond(cube_model, ahead, {{&bar_model, behind}}, camera, empty.edge_map, 90).samples,
+            0);
+  // Alone in the empty image, the cube claims its whole image, all of it bare table.
+  const ClaimedAlone cube_on_empty = BareTableBeyond(cube_model, ahead, {}, camera, empty.edge_map, 90);
+  EXPECT_GE(cube_on_empty.samples, 100);
+  EXPECT_EQ(cube_on_empty.bare, cube_on_empty.samples);
+}
+
+// Standing on bare table (RecognizerOptions::max_bare_table_share): in the image of a cube, a bar
+// recognized where the table is empty is dropped and the cube stays; a bar laid over the cube and on
+// past it is dropped too, the cube judged again without it; with the share 0 nothing is.
+TEST(SelectionTest, ARecognitionOnBareTableIsDropped) {
+  const Camera camera = SyntheticCamera();
+  const RecognizerOptions options;
+  const Model bar_model = Bar(), cube_model = Cube();
+  const geometry::Pose3 camera_T_world = camera.camera_T_world();
+  for (const double yaw : {-0.3, 0.45, 1.2}) {
+    const geometry::Pose3 cube = OnTable(Cube().box_size_m, 0.03, -0.02, yaw);
+    const LineDetection image =
+        DetectLinesAndEdges(RenderBoxes(camera, {{Cube().box_size_m, cube}}, 13), camera, options);
+    const int table = TableGrey(image.edge_map);
+    const geometry::Pose3 bar_elsewhere = OnTable(Bar().box_size_m, -0.08, 0.07, yaw + 0.4);
+    geometry::Pose3 bar_over = cube;
+    bar_over.translation = cube * Eigen::Vector3d(-0.0225, 0, 0);
+    const std::vector<std::pair<const Model*, geometry::Pose3>> three = {
+        {&cube_model, camera_T_world * cube},
+        {&bar_model, camera_T_world * bar_elsewhere},
+        {&bar_model, camera_T_world * bar_over}};
+    const std::vector<size_t> dropped = StandingOnBareTable(three, camera, image.edge_map, table, 0.6);
+    EXPECT_EQ(dropped.size(), 2u) << "yaw " << yaw;
+    EXPECT_EQ(std::count(dropped.begin(), dropped.end(), 0u), 0) << "yaw " << yaw;
+    EXPECT_TRUE(StandingOnBareTable(three, camera, image.edge_map, table, 0).empty()) << "yaw " << yaw;
+    // The cube alone claims its lit faces: nothing bare.
+    EXPECT_TRUE(StandingOnBareTable({three[0]}, camera, image.edge_map, table, 0.6).empty()) << "yaw " << yaw;
+  }
+}
+
 // Explained away (RecognizerOptions::min_own_balance): in the image of a bar, a cube recognized on
 // the bar's end beside the bar itself predicts nothing of its own that is in the image and is
 // dropped, the bar stays; in an image of a bar and a cube apart, both recognized, neither is dropped;
@@ -1383,6 +1475,55 @@ TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInI
   }
 }
 
+// The pairwise decision with what each side claims alone (RecognizerOptions::conflict_bare_table_share,
+// 0.3): a candidate that would replace its rival by the outlines does not when 0.3 or more of its own
+// claim (10 points at least) is bare table; one that would not does when the rival's claim is such
+// bare table and its own is at most 0.1 bare. Seeds 46 and 49 (a slab and a tall block laid over the
+// table beside a plate and a bar) and seeds 46, 48 and 50 (the rival a slab or bar over the table).
+TEST(SelectionTest, AClaimOfBareTableDecidesThePairwiseTest) {
+  RecognizerOptions options;
+  options.conflict_bare_table_share = 0.3;
+  RecognizerOptions off = options;
+  off.conflict_bare_table_share = 0;
+  // Sides that replace by the outlines (the rival's own outline not in the image) and sides that do not.
+  auto side = [](int own, double rank, ClaimedAlone alone) {
+    PairwiseSide s{own, rank, 1.0};
+    s.alone = alone;
+    return s;
+  };
+  struct Case {
+    const char* what;
+    PairwiseSide candidate, rival;
+    const RecognizerOptions& options;
+    bool replaces;
+  } cases[] = {
+      {"replaces by the outlines, nothing bare", side(20, 100, {300, 0}), side(2, 200, {200, 0}), options,
+       true},
+      {"replaces by the outlines, its claim bare", side(20, 100, {703, 530}), side(2, 200, {0, 0}), options,
+       false},
+      {"replaces by the outlines, its claim exactly 0.3 bare", side(20, 100, {100, 30}), side(2, 200, {}),
+       options, false},
+      {"replaces by the outlines, its claim 0.29 bare", side(20, 100, {100, 29}), side(2, 200, {}), options,
+       true},
+      {"replaces by the outlines, 9 bare points", side(20, 100, {10, 9}), side(2, 200, {}), options, true},
+      {"replaces by the outlines, its claim bare, switched off", side(20, 100, {703, 530}), side(2, 200, {}),
+       off, true},
+      {"not by the outlines, the rival's claim bare", side(0, 100, {400, 20}), side(30, 300, {300, 200}),
+       options, true},
+      {"not by the outlines, the rival's claim bare, its own nothing", side(0, 100, {}),
+       side(30, 300, {300, 200}), options, true},
+      {"not by the outlines, both claims bare", side(0, 100, {400, 60}), side(30, 300, {300, 200}), options,
+       false},
+      {"not by the outlines, the rival's claim 0.2 bare", side(0, 100, {400, 0}), side(30, 300, {300, 60}),
+       options, false},
+      {"not by the outlines, the rival's claim bare, switched off", side(0, 100, {400, 20}),
+       side(30, 300, {300, 200}), off, false},
+  };
+  for (const Case& c : cases) {
+    EXPECT_EQ(ReplacesRival(c.candidate, c.rival, c.options), c.replaces) << c.what;
+  }
+}
+
 // WithinBox: a cube laid at one end of a bar lies within it, in any yaw of the two together and up to
 // 5 mm out; a cube 6 mm past the bar's end, one turned on it, one beside it, and the bar within the
 // cube do not.
@@ -1510,11 +1651,13 @@ TEST(VerificationTest, AnOutlineOfThinLinesIsNoStepBetweenSurfaces) {
 
   // Recognition of the drawing: nothing with the rule, and (so that the rule is what decides) the
   // bar without it. Without it the selection's explained-away rule is off too: it counts only
-  // steps as the outline in the image (OwnOutlineBalance), so it would drop the drawn bar as well.
+  // steps as the outline in the image (OwnOutlineBalance), so it would drop the drawn bar as well;
+  // and so is the pairwise test's weighing of bare table (conflict_bare_table_share): the drawn
+  // bar's inside is the plain table, its claim against a cube fitted onto its end is bare.
   for (const double share : {options.min_step_share, 0.0}) {
     RecognizerOptions o = SmallIndexOptions();
     o.min_step_share = share;
-    if (share == 0) o.min_own_balance = 0;
+    if (share == 0) o.min_own_balance = 0, o.conflict_bare_table_share = 0;
     auto recognizer = Recognizer::Create({{Cube(), Bar()}}, o, "");
     ASSERT_TRUE(recognizer.ok()) << recognizer.status().message();
     auto result = recognizer->Recognize(drawn, camera, nullptr);

@@ -630,6 +630,8 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
       {"tightfit", [o](double v) { o->support_tight_fit_shift_px = v; }},
       {"rmsratio", [o](double v) { o->conflict_rms_ratio = v; }},
       {"scorelead", [o](double v) { o->conflict_score_lead = v; }},
+      {"baretable", [o](double v) { o->conflict_bare_table_share = v; }},
+      {"barealone", [o](double v) { o->max_bare_table_share = v; }},
   };
   const auto setter = setters.find(name);
   if (setter == setters.end()) {
@@ -651,7 +653,7 @@ std::optional<std::string> ApplyAblation(const std::string& a, vision::Recognize
            "laddercoverage-X, "
            "refitinimage-X, "
            "balance-N, ownlead-N, rankshare-X, withinshare-X, inimagelead-X, tieshare-X, ownbalance-N, "
-           "centreslack-MM, tightfit-PX, rmsratio-X, scorelead-X)";
+           "centreslack-MM, tightfit-PX, rmsratio-X, scorelead-X, baretable-X, barealone-X)";
   }
   if (!number) return "'" + text + "' after '" + name + "-' is not a number";
   setter->second(value);

@@ -616,6 +616,29 @@ int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object
                       const std::vector<std::pair<const Model*, geometry::Pose3>>& others,
                       const Camera& camera, const EdgeMap& edge_map, const FixedEdgeMap& fixed,
                       const RecognizerOptions& options);
+// The grey level of the bare table: the median of EdgeMap::smoothed over every other pixel in x
+// and y (a work-site camera sees mostly table).
+int TableGrey(const EdgeMap& edge_map);
+// What a pose claims alone in the image (the selection's pairwise test, see
+// RecognizerOptions::conflict_bare_table_share): the points every 2 px (pin-hole pixels) at least
+// 4 px inside its box's image (the hull of its corners' projections) and at least 4 px outside each
+// of `others`' images (its rival's and the other recognitions'), and inside the picture; of those,
+// the ones that look like the bare table: no Canny edge pixel near (EdgeMap::near, kEdgeNearPx) and a
+// smoothed grey within 15 of `table_grey`. Nothing where its image or one of the others' reaches
+// behind the camera.
+struct ClaimedAlone {
+  int samples = 0, bare = 0;
+};
+ClaimedAlone BareTableBeyond(const Model& model, const geometry::Pose3& camera_T_object,
+                             const std::vector<std::pair<const Model*, geometry::Pose3>>& others,
+                             const Camera& camera, const EdgeMap& edge_map, int table_grey);
+// The recognitions that stand on bare table (RecognizerOptions::max_bare_table_share): each one's claim
+// alone against all the others (BareTableBeyond); the barest is dropped while `share` or more of its
+// claim, 10 points at least, is bare table, and the rest are judged again without it. Positions into
+// `recognitions` (model, camera_T_object), in the order dropped; none when `share` is 0.
+std::vector<size_t> StandingOnBareTable(
+    const std::vector<std::pair<const Model*, geometry::Pose3>>& recognitions, const Camera& camera,
+    const EdgeMap& edge_map, int table_grey, double share);
 // The recognitions that the others explain away (RecognizerOptions::min_own_balance): each one's
 // OwnOutlineBalance against all the others; the weakest is dropped while it is under the minimum, and
 // the rest are judged again without it. Positions into `recognitions` (model, camera_T_object), in
@@ -638,6 +661,8 @@ struct PairwiseSide {
   double rms_px = 0;
   double score = 0;
   int model = -1;
+  // What it claims alone (BareTableBeyond), where the test weighs it; else none.
+  ClaimedAlone alone;
 };
 // The selection's pairwise decision: the candidate replaces its rival when its own balance reaches
 // RecognizerOptions::conflict_balance_margin and either the rival's own is at most 3 (nothing of it
