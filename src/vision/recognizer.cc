@@ -792,32 +792,50 @@ int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object
   return balance;
 }
 
-std::vector<size_t> ExplainedAway(const std::vector<std::pair<const Model*, geometry::Pose3>>& recognitions,
-                                  const Camera& camera, const EdgeMap& edge_map, const FixedEdgeMap& fixed,
-                                  const RecognizerOptions& options) {
+namespace {
+
+// The recognitions dropped one at a time, the worst first, each judged against the others still
+// kept: `badness(k, others)` of recognition k, or nothing where it is fine. Positions in the order
+// dropped; on a tie the first.
+template <typename Badness>
+std::vector<size_t> DroppedWorstFirst(
+    const std::vector<std::pair<const Model*, geometry::Pose3>>& recognitions, Badness badness) {
   std::vector<size_t> dropped;
-  if (options.min_own_balance <= 0) return dropped;
   std::vector<size_t> kept(recognitions.size());
   for (size_t k = 0; k < kept.size(); ++k) kept[k] = k;
   std::vector<std::pair<const Model*, geometry::Pose3>> others;
   while (!kept.empty()) {
-    int weakest = std::numeric_limits<int>::max();
-    size_t weakest_at = 0;
+    std::optional<double> worst;
+    size_t worst_at = 0;
     for (size_t k = 0; k < kept.size(); ++k) {
       others.clear();
       for (size_t j : kept) {
         if (j != kept[k]) others.push_back(recognitions[j]);
       }
-      const auto& [model, camera_T_object] = recognitions[kept[k]];
-      const int balance =
-          OwnOutlineBalance(*model, camera_T_object, others, camera, edge_map, fixed, options);
-      if (balance < weakest) weakest = balance, weakest_at = k;
+      const std::optional<double> bad = badness(recognitions[kept[k]], others);
+      if (bad && (!worst || *bad > *worst)) worst = bad, worst_at = k;
     }
-    if (weakest >= options.min_own_balance) break;
-    dropped.push_back(kept[weakest_at]);
-    kept.erase(kept.begin() + static_cast<std::ptrdiff_t>(weakest_at));
+    if (!worst) break;
+    dropped.push_back(kept[worst_at]);
+    kept.erase(kept.begin() + static_cast<std::ptrdiff_t>(worst_at));
   }
   return dropped;
+}
+
+}  // namespace
+
+std::vector<size_t> ExplainedAway(const std::vector<std::pair<const Model*, geometry::Pose3>>& recognitions,
+                                  const Camera& camera, const EdgeMap& edge_map, const FixedEdgeMap& fixed,
+                                  const RecognizerOptions& options) {
+  if (options.min_own_balance <= 0) return {};
+  return DroppedWorstFirst(
+      recognitions, [&](const auto& recognition, const auto& others) -> std::optional<double> {
+        const auto& [model, camera_T_object] = recognition;
+        const int balance =
+            OwnOutlineBalance(*model, camera_T_object, others, camera, edge_map, fixed, options);
+        if (balance >= options.min_own_balance) return std::nullopt;
+        return -balance;  // the weakest first
+      });
 }
 
 // At least this many points (2 px apart) of bare table make a claim bare: a sliver along another
@@ -944,31 +962,17 @@ ClaimedAlone BareTableBeyond(const Model& model, const geometry::Pose3& camera_T
 std::vector<size_t> StandingOnBareTable(
     const std::vector<std::pair<const Model*, geometry::Pose3>>& recognitions, const Camera& camera,
     const EdgeMap& edge_map, int table_grey, double share) {
-  std::vector<size_t> dropped;
-  if (share <= 0) return dropped;
-  std::vector<size_t> kept(recognitions.size());
-  for (size_t k = 0; k < kept.size(); ++k) kept[k] = k;
-  std::vector<std::pair<const Model*, geometry::Pose3>> others;
-  while (!kept.empty()) {
-    double barest = -1;
-    size_t barest_at = 0;
-    for (size_t k = 0; k < kept.size(); ++k) {
-      others.clear();
-      for (size_t j : kept) {
-        if (j != kept[k]) others.push_back(recognitions[j]);
-      }
-      const auto& [model, camera_T_object] = recognitions[kept[k]];
-      const ClaimedAlone alone =
-          BareTableBeyond(*model, camera_T_object, others, camera, edge_map, table_grey);
-      if (alone.bare < kMinBarePoints) continue;
-      const double bare_share = static_cast<double>(alone.bare) / alone.samples;
-      if (bare_share >= share && bare_share > barest) barest = bare_share, barest_at = k;
-    }
-    if (barest < 0) break;
-    dropped.push_back(kept[barest_at]);
-    kept.erase(kept.begin() + static_cast<std::ptrdiff_t>(barest_at));
-  }
-  return dropped;
+  if (share <= 0) return {};
+  return DroppedWorstFirst(
+      recognitions, [&](const auto& recognition, const auto& others) -> std::optional<double> {
+        const auto& [model, camera_T_object] = recognition;
+        const ClaimedAlone alone =
+            BareTableBeyond(*model, camera_T_object, others, camera, edge_map, table_grey);
+        if (alone.bare < kMinBarePoints) return std::nullopt;
+        const double bare_share = static_cast<double>(alone.bare) / alone.samples;
+        if (bare_share < share) return std::nullopt;
+        return bare_share;  // the barest first
+      });
 }
 
 namespace {
