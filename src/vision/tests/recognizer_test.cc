@@ -1222,16 +1222,21 @@ TEST(SelectionTest, WhatTheRightModelPredictsAloneIsInTheImage) {
   }
 }
 
+// The scene the bare-table tests share: the synthetic camera, the default options, a bar and a cube.
+class BareTableTest : public ::testing::Test {
+ protected:
+  const Camera camera = SyntheticCamera();
+  const RecognizerOptions options;
+  const Model bar_model = Bar(), cube_model = Cube();
+  const geometry::Pose3 camera_T_world = camera.camera_T_world();
+};
+
 // What a pose claims alone (BareTableBeyond): in the image of a cube, a bar laid over it and on past
 // it claims the bare table beyond the cube, and the cube claims nothing the bar does not; in the
 // image of a bar, the bar's other half, which a cube on its one end leaves out, is the bar's lit faces,
 // not the table. Another accepted recognition's image is nobody's claim, and TableGrey is the
 // table's grey.
-TEST(SelectionTest, WhatAWrongModelClaimsAloneIsTheBareTable) {
-  const Camera camera = SyntheticCamera();
-  const RecognizerOptions options;
-  const Model bar_model = Bar(), cube_model = Cube();
-  const geometry::Pose3 camera_T_world = camera.camera_T_world();
+TEST_F(BareTableTest, WhatAWrongModelClaimsAloneIsTheBareTable) {
   for (const double yaw : {-0.3, 0.45, 1.2}) {
     const geometry::Pose3 bar = OnTable(Bar().box_size_m, 0.03, -0.02, yaw);
     geometry::Pose3 cube = bar;  // on the bar's +x end
@@ -1288,11 +1293,7 @@ TEST(SelectionTest, WhatAWrongModelClaimsAloneIsTheBareTable) {
 // Standing on bare table (RecognizerOptions::max_bare_table_share): in the image of a cube, a bar
 // recognized where the table is empty is dropped and the cube stays; a bar laid over the cube and on
 // past it is dropped too, the cube judged again without it; with the share 0 nothing is.
-TEST(SelectionTest, ARecognitionOnBareTableIsDropped) {
-  const Camera camera = SyntheticCamera();
-  const RecognizerOptions options;
-  const Model bar_model = Bar(), cube_model = Cube();
-  const geometry::Pose3 camera_T_world = camera.camera_T_world();
+TEST_F(BareTableTest, ARecognitionOnBareTableIsDropped) {
   for (const double yaw : {-0.3, 0.45, 1.2}) {
     const geometry::Pose3 cube = OnTable(Cube().box_size_m, 0.03, -0.02, yaw);
     const LineDetection image =
@@ -1355,6 +1356,14 @@ TEST(SelectionTest, ARecognitionTheOthersExplainAwayIsDropped) {
   }
 }
 
+// One pairwise decision (ReplacesRival) and what it should be, for the two tests below.
+struct PairwiseCase {
+  const char* what;
+  PairwiseSide candidate, rival;
+  const RecognizerOptions& options;
+  bool replaces;
+};
+
 // The selection's pairwise decision on the numbers it is given: a candidate whose own outline is
 // not in the image does not replace by evidence; one whose rival's own outline is not either does;
 // where both own outlines show, the candidate needs the lead and the rank share; where neither shows,
@@ -1387,12 +1396,7 @@ TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInI
   const RecognizerOptions within_higher = with(&RecognizerOptions::conflict_within_rank_share, 0.9);
   const RecognizerOptions within_off = with(&RecognizerOptions::conflict_within_rank_share, 0);
   const RecognizerOptions rms_off = with(&RecognizerOptions::conflict_rms_ratio, 0);
-  struct Case {
-    const char* what;
-    PairwiseSide candidate, rival;
-    const RecognizerOptions& options;
-    bool replaces;
-  } cases[] = {
+  const PairwiseCase cases[] = {
       {"own outline under the margin, rival's shows", {9, 300, 1.0}, {-20, 100, 0.5}, defaults, false},
       {"rival's own outline not in the image", {10, 50, 1.0}, {3, 400, 1.0}, defaults, true},
       {"both show, lead and rank share", {88, 277.7, 1.0}, {73, 285.0, 1.0}, defaults, true},
@@ -1470,7 +1474,7 @@ TEST(SelectionTest, ACandidateReplacesItsRivalByItsOwnOutlineLeadRankAndShareInI
        rms_off,
        false},
   };
-  for (const Case& c : cases) {
+  for (const PairwiseCase& c : cases) {
     EXPECT_EQ(ReplacesRival(c.candidate, c.rival, c.options), c.replaces) << c.what;
   }
 }
@@ -1491,12 +1495,7 @@ TEST(SelectionTest, AClaimOfBareTableDecidesThePairwiseTest) {
     s.alone = alone;
     return s;
   };
-  struct Case {
-    const char* what;
-    PairwiseSide candidate, rival;
-    const RecognizerOptions& options;
-    bool replaces;
-  } cases[] = {
+  const PairwiseCase cases[] = {
       {"replaces by the outlines, nothing bare", side(20, 100, {300, 0}), side(2, 200, {200, 0}), options,
        true},
       {"replaces by the outlines, its claim bare", side(20, 100, {703, 530}), side(2, 200, {0, 0}), options,
@@ -1519,7 +1518,7 @@ TEST(SelectionTest, AClaimOfBareTableDecidesThePairwiseTest) {
       {"not by the outlines, the rival's claim bare, switched off", side(0, 100, {400, 20}),
        side(30, 300, {300, 200}), off, false},
   };
-  for (const Case& c : cases) {
+  for (const PairwiseCase& c : cases) {
     EXPECT_EQ(ReplacesRival(c.candidate, c.rival, c.options), c.replaces) << c.what;
   }
 }
