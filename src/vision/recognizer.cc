@@ -860,19 +860,16 @@ int TableGrey(const EdgeMap& edge_map) {
 namespace {
 
 // A box's image as the pin-hole camera sees it: the convex hull of its corners' projections, its
-// corners in the order that makes every turn and the shoelace area positive (Cross2), with its
-// bounding box.
+// corners in the order that makes every turn and the shoelace area positive (Cross2), each side's unit
+// inward normal (worked out once: the samplers ask every side of several hulls at every point), and
+// its bounding box.
 struct BoxImageHull {
-  std::vector<Eigen::Vector2d> corners;
+  std::vector<Eigen::Vector2d> corners, inward;  // inward[i]: the side from corners[i] to the next
   Eigen::Vector2d lo, hi;
   // How far `q` lies inside (> 0) or outside (< 0): exact inside; outside, at most the distance.
   double Depth(const Eigen::Vector2d& q) const {
     double depth = std::numeric_limits<double>::infinity();
-    for (size_t i = 0; i < corners.size(); ++i) {
-      const Eigen::Vector2d& a = corners[i];
-      const Eigen::Vector2d e = corners[(i + 1) % corners.size()] - a;
-      depth = std::min(depth, Cross2(e, q - a) / e.norm());
-    }
+    for (size_t i = 0; i < corners.size(); ++i) depth = std::min(depth, inward[i].dot(q - corners[i]));
     return depth;
   }
   // Whether `q` lies at least margin_px inside.
@@ -917,6 +914,10 @@ std::optional<BoxImageHull> ImageHullOf(const Model& model, const geometry::Pose
   double area = 0;
   for (size_t i = 0; i < hull.size(); ++i) area += Cross2(hull[i], hull[(i + 1) % hull.size()]);
   if (hull.size() < 3 || area < 1) return std::nullopt;
+  for (size_t i = 0; i < hull.size(); ++i) {
+    const Eigen::Vector2d e = hull[(i + 1) % hull.size()] - hull[i];  // no repeated corner: each turn > 0
+    out.inward.push_back(Eigen::Vector2d(-e.y(), e.x()) / e.norm());  // Cross2(e, d) / |e| = inward . d
+  }
   out.lo = out.hi = out.corners.front();
   for (const Eigen::Vector2d& q : out.corners) out.lo = out.lo.cwiseMin(q), out.hi = out.hi.cwiseMax(q);
   return out;
