@@ -795,8 +795,8 @@ int OwnOutlineBalance(const Model& model, const geometry::Pose3& camera_T_object
 namespace {
 
 // The recognitions dropped one at a time, the worst first, each judged against the others still
-// kept: `badness(k, others)` of recognition k, or nothing where it is fine. Positions in the order
-// dropped; on a tie the first.
+// kept: `badness(recognition, others)`, or nothing where it is fine. Positions in the order dropped;
+// on a tie the first.
 template <typename Badness>
 std::vector<size_t> DroppedWorstFirst(
     const std::vector<std::pair<const Model*, geometry::Pose3>>& recognitions, Badness badness) {
@@ -859,10 +859,9 @@ int TableGrey(const EdgeMap& edge_map) {
 
 namespace {
 
-// A box's image as the pin-hole camera sees it: the convex hull of its corners' projections, its
-// corners in the order that makes every turn and the shoelace area positive (Cross2), each side's unit
-// inward normal (worked out once: the samplers ask every side of several hulls at every point), and
-// its bounding box.
+// A box's image as the pin-hole camera sees it: the convex hull of its corners' projections
+// (BoxImage's, every other corner to the left of each side), each side's unit inward normal (worked
+// out once: the samplers ask every side of several hulls at every point), and its bounding box.
 struct BoxImageHull {
   std::vector<Eigen::Vector2d> corners, inward;  // inward[i]: the side from corners[i] to the next
   Eigen::Vector2d lo, hi;
@@ -893,29 +892,13 @@ std::optional<BoxImageHull> ImageHullOf(const Model& model, const geometry::Pose
     if (!(p.z() > 1e-3)) return std::nullopt;
     px[static_cast<size_t>(v)] = (K * p).hnormalized();
   }
-  // Andrew's monotone chain: one chain along increasing x, then one back, each turn Cross2 > 0,
-  // which keeps the inside where Depth() takes it.
-  std::sort(px.begin(), px.end(), [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-    return a.x() != b.x() ? a.x() < b.x() : a.y() < b.y();
-  });
+  const BoxImage image(px, 0);  // its hull: every other corner to the left of each side (Cross2 >= 0)
+  if (image.hull_size < 3) return std::nullopt;
   BoxImageHull out;
-  std::vector<Eigen::Vector2d>& hull = out.corners;
-  for (int pass = 0; pass < 2; ++pass) {
-    const size_t start = hull.size();
-    for (size_t k = 0; k < px.size(); ++k) {
-      const Eigen::Vector2d& q = pass == 0 ? px[k] : px[px.size() - 1 - k];
-      while (hull.size() >= start + 2 &&
-             Cross2(hull[hull.size() - 1] - hull[hull.size() - 2], q - hull[hull.size() - 2]) <= 0)
-        hull.pop_back();
-      hull.push_back(q);
-    }
-    hull.pop_back();  // each chain's last point starts the other
-  }
-  double area = 0;
-  for (size_t i = 0; i < hull.size(); ++i) area += Cross2(hull[i], hull[(i + 1) % hull.size()]);
-  if (hull.size() < 3 || area < 1) return std::nullopt;
-  for (size_t i = 0; i < hull.size(); ++i) {
-    const Eigen::Vector2d e = hull[(i + 1) % hull.size()] - hull[i];  // no repeated corner: each turn > 0
+  for (int i = 0; i < image.hull_size; ++i) out.corners.push_back(px[static_cast<size_t>(image.hull[i])]);
+  for (size_t i = 0; i < out.corners.size(); ++i) {
+    const Eigen::Vector2d e = out.corners[(i + 1) % out.corners.size()] - out.corners[i];
+    if (!(e.norm() > 1e-9)) return std::nullopt;
     out.inward.push_back(Eigen::Vector2d(-e.y(), e.x()) / e.norm());  // Cross2(e, d) / |e| = inward . d
   }
   out.lo = out.hi = out.corners.front();
