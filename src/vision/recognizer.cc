@@ -935,7 +935,9 @@ ClaimedAlone BareTableBeyond(const Model& model, const geometry::Pose3& camera_T
       const int px = NearestPixel(at.x(), grey.cols), py = NearestPixel(at.y(), grey.rows);
       if (px < 0 || py < 0) continue;
       ++out.samples;
-      if (NoEdgeNear(edge_map, at) && std::abs(grey.ptr<uint8_t>(py)[px] - table_grey) <= kGreyTolerance) {
+      // No edge pixel near (NoEdgeNear at the pixel already found; without EdgeMap::near, none is bare).
+      if (edge_map.near.data != nullptr && !NearEdge(edge_map, px, py) &&
+          std::abs(grey.ptr<uint8_t>(py)[px] - table_grey) <= kGreyTolerance) {
         ++out.bare;
       }
     }
@@ -1386,7 +1388,14 @@ class RecognitionPass {
   const std::vector<Candidate>& candidates() const { return candidates_; }
 
  private:
-  int table_grey_ = -1;  // TableGrey, worked out when the selection first needs it
+  int table_grey_ = -1;  // TableGrey, worked out when first needed (TableGreyOnce)
+  int TableGreyOnce();
+  // The accepted candidates' models and poses, in order.
+  std::vector<std::pair<const Model*, geometry::Pose3>> ModelsAndPoses(
+      const std::vector<size_t>& accepted) const;
+  // `accepted` without the positions `dropped`, and without what rested on them (SupportedSubset).
+  std::vector<size_t> KeptWithout(const std::vector<size_t>& accepted,
+                                  const std::vector<size_t>& dropped) const;
   // Whether an initial pose like this one (1 cm, 8 degrees up to the model's symmetry) was fitted;
   // remembers it.
   bool AlreadyTried(int model_index, const geometry::Pose3& initial);
@@ -1794,11 +1803,11 @@ std::vector<size_t> RecognitionPass::Select(const std::vector<ImageLine>* contou
                          .model = a.model};
       if (options_.conflict_bare_table_share > 0) {
         // What each claims alone, the other accepted recognitions' images left out of both.
-        if (table_grey_ < 0) table_grey_ = TableGrey(detection_.edge_map);
+        const int table_grey = TableGreyOnce();
         rival.alone =
-            BareTableBeyond(ma, a.camera_T_object, others, camera_, detection_.edge_map, table_grey_);
+            BareTableBeyond(ma, a.camera_T_object, others, camera_, detection_.edge_map, table_grey);
         others.front() = {&ma, a.camera_T_object};
-        own.alone = BareTableBeyond(mc, c.camera_T_object, others, camera_, detection_.edge_map, table_grey_);
+        own.alone = BareTableBeyond(mc, c.camera_T_object, others, camera_, detection_.edge_map, table_grey);
       }
       if (ReplacesRival(own, rival, options_)) accepted[conflicts[0]] = i;
     }
@@ -1806,15 +1815,18 @@ std::vector<size_t> RecognitionPass::Select(const std::vector<ImageLine>* contou
   return WithoutExplainedAway(SupportedSubset(accepted));
 }
 
-std::vector<size_t> RecognitionPass::WithoutExplainedAway(std::vector<size_t> accepted) const {
-  if (options_.min_own_balance <= 0 || accepted.empty()) return accepted;
+std::vector<std::pair<const Model*, geometry::Pose3>> RecognitionPass::ModelsAndPoses(
+    const std::vector<size_t>& accepted) const {
   std::vector<std::pair<const Model*, geometry::Pose3>> recognitions;
   for (size_t i : accepted) {
     const Candidate& c = candidates_[i];
     recognitions.push_back({&models_.models[static_cast<size_t>(c.model)], c.camera_T_object});
   }
-  const std::vector<size_t> dropped =
-      ExplainedAway(recognitions, camera_, detection_.edge_map, fixed_edges_, options_);
+  return recognitions;
+}
+
+std::vector<size_t> RecognitionPass::KeptWithout(const std::vector<size_t>& accepted,
+                                                 const std::vector<size_t>& dropped) const {
   if (dropped.empty()) return accepted;
   std::vector<size_t> kept;
   for (size_t k = 0; k < accepted.size(); ++k) {
@@ -1823,22 +1835,21 @@ std::vector<size_t> RecognitionPass::WithoutExplainedAway(std::vector<size_t> ac
   return SupportedSubset(kept);  // what rested on a dropped one no longer stands
 }
 
+int RecognitionPass::TableGreyOnce() {
+  if (table_grey_ < 0) table_grey_ = TableGrey(detection_.edge_map);
+  return table_grey_;
+}
+
+std::vector<size_t> RecognitionPass::WithoutExplainedAway(std::vector<size_t> accepted) const {
+  if (options_.min_own_balance <= 0 || accepted.empty()) return accepted;
+  return KeptWithout(accepted, ExplainedAway(ModelsAndPoses(accepted), camera_, detection_.edge_map,
+                                             fixed_edges_, options_));
+}
+
 std::vector<size_t> RecognitionPass::WithoutBareClaims(std::vector<size_t> accepted) {
   if (options_.max_bare_table_share <= 0 || accepted.empty()) return accepted;
-  if (table_grey_ < 0) table_grey_ = TableGrey(detection_.edge_map);
-  std::vector<std::pair<const Model*, geometry::Pose3>> recognitions;
-  for (size_t i : accepted) {
-    const Candidate& c = candidates_[i];
-    recognitions.push_back({&models_.models[static_cast<size_t>(c.model)], c.camera_T_object});
-  }
-  const std::vector<size_t> dropped = StandingOnBareTable(recognitions, camera_, detection_.edge_map,
-                                                          table_grey_, options_.max_bare_table_share);
-  if (dropped.empty()) return accepted;
-  std::vector<size_t> kept;
-  for (size_t k = 0; k < accepted.size(); ++k) {
-    if (std::find(dropped.begin(), dropped.end(), k) == dropped.end()) kept.push_back(accepted[k]);
-  }
-  return SupportedSubset(kept);  // what rested on a dropped one no longer stands
+  return KeptWithout(accepted, StandingOnBareTable(ModelsAndPoses(accepted), camera_, detection_.edge_map,
+                                                   TableGreyOnce(), options_.max_bare_table_share));
 }
 
 void RecognitionPass::ReverifyOccluded(std::vector<size_t>* accepted_io,
