@@ -408,7 +408,9 @@ struct BoxImage {
 // How a contour passes through a box's image: across it (it enters and leaves the hull at least
 // 4 px inside its own ends), or into it (one end 4 px or more beyond the hull, the other not: the
 // end of something in front lies over the box), at least 10 px of it inside the hull, and along none
-// of the visible edges (both ends of one within 3 px of its line); else kNone.
+// of the visible edges (both ends of one within 3 px of its line) unless it reaches 40 px or more past
+// the hull, its two ends together (a flank in front that runs along one of the box's edges); else
+// kNone.
 enum class ContourPassage : uint8_t { kNone, kAcross, kIntoAtA, kIntoAtB };  // kIntoAtB: b is inside
 ContourPassage PassageThroughBoxImage(const ImageLine& contour, const BoxImage& box);
 bool CrossesBoxImage(const ImageLine& contour, const BoxImage& box);  // passage kAcross
