@@ -131,7 +131,7 @@ ContourPassage PassageThroughBoxImage(const ImageLine& contour, const BoxImage& 
   if (!(inside >= kMinInsidePx) || (!a_beyond && !b_beyond)) return ContourPassage::kNone;
   // None of the box's own visible edges: a line along one of them is that edge (a block's outline
   // against the table looks like a contour), unless it reaches kOwnEdgeOverhangPx or more past the
-  // box's image, ends together. A block's edge ends at its corners; such a line is the flank of
+  // box's image, both ends together. A block's edge ends at its corners; such a line is the flank of
   // something in front that happens to run along one of its edges (an upright edge beside the
   // benchmark's upright cylinder). Session 71, render seeds 7-71: 2 / 10 / 7 more blocks found (>= 0.7
   // / 0.4-0.7 / < 0.4 visible), 1 more false detection (docs/benchmarks.md).

@@ -35,12 +35,8 @@ TEST(ContoursTest, ALineCrossesABoxImageOnlyWhenItRunsAcrossAllOfIt) {
   EXPECT_FALSE(CrossesBoxImage({{250, 192}, {250, 400}}, box));  // ends 2 px before the outline
   EXPECT_FALSE(CrossesBoxImage({{400, 100}, {400, 400}}, box));  // beside it
   EXPECT_FALSE(CrossesBoxImage({{100, 50}, {400, 50}}, box));    // above it
-  // Along one of its own edges (the far face's bottom edge, y = 260, x 200-300) and past the box's
-  // image by less than 40 px, both ends together: that edge, no occluder.
-  EXPECT_FALSE(CrossesBoxImage({{185, 260}, {320, 260}}, box));
-  EXPECT_FALSE(CrossesBoxImage({{185, 261.5}, {320, 261.5}}, box));
-  // Past it by 40 px or more, still none: the box's image lies on one side of the line (an edge on
-  // its outline; the edges inside it below).
+  // Along its outline (the far face's bottom edge, y = 260), however far past it: no occluder, the
+  // box's image lies on one side of the line (a line along an edge inside the image: below).
   EXPECT_FALSE(CrossesBoxImage({{150, 260}, {400, 260}}, box));
   EXPECT_FALSE(CrossesBoxImage({{150, 261.5}, {400, 261.5}}, box));
   // A short line never does.
@@ -51,9 +47,10 @@ TEST(ContoursTest, ALineCrossesABoxImageOnlyWhenItRunsAcrossAllOfIt) {
   EXPECT_EQ(PassageThroughBoxImage({{250, 100}, {250, 400}}, box), ContourPassage::kAcross);
   EXPECT_EQ(PassageThroughBoxImage({{250, 200}, {250, 245}}, box), ContourPassage::kNone);  // inside
   EXPECT_EQ(PassageThroughBoxImage({{250, 100}, {250, 195}}, box), ContourPassage::kNone);  // 5 px in
-  EXPECT_EQ(PassageThroughBoxImage({{185, 260}, {250, 260}}, box), ContourPassage::kNone);  // own edge
+  EXPECT_EQ(PassageThroughBoxImage({{150, 260}, {250, 260}}, box), ContourPassage::kNone);  // its outline
   // An edge inside the box's image, the near face's left one (x = 210, y 190-250), and a line along
-  // it: within 40 px of the image, the edge; beyond, a flank down across the box.
+  // it: reaching 35 px past the image (15 above, 20 below), that edge; 40 px or more, a flank in
+  // front, down across the box or into it.
   EXPECT_EQ(PassageThroughBoxImage({{210, 175}, {210, 280}}, box), ContourPassage::kNone);
   EXPECT_EQ(PassageThroughBoxImage({{210, 100}, {210, 400}}, box), ContourPassage::kAcross);
   EXPECT_EQ(PassageThroughBoxImage({{210, 100}, {210, 230}}, box), ContourPassage::kIntoAtB);
