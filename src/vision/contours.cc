@@ -136,11 +136,13 @@ ContourPassage PassageThroughBoxImage(const ImageLine& contour, const BoxImage& 
   // benchmark's upright cylinder). Session 71, render seeds 7-71: 2 / 10 / 7 more blocks found (>= 0.7
   // / 0.4-0.7 / < 0.4 visible), 1 more false detection (docs/benchmarks.md).
   const double overhang = std::max(t_in, 0.0) + std::max(length - t_out, 0.0);
-  for (int e = 0; e < 12 && overhang < kOwnEdgeOverhangPx; ++e) {
-    if (!(box.visible_edges >> e & 1)) continue;
-    if (std::abs(normal.dot(box.px[kBoxEdges[e][0]] - contour.a)) < kOwnEdgePx &&
-        std::abs(normal.dot(box.px[kBoxEdges[e][1]] - contour.a)) < kOwnEdgePx) {
-      return ContourPassage::kNone;
+  if (overhang < kOwnEdgeOverhangPx) {
+    for (int e = 0; e < 12; ++e) {
+      if (!(box.visible_edges >> e & 1)) continue;
+      if (std::abs(normal.dot(box.px[kBoxEdges[e][0]] - contour.a)) < kOwnEdgePx &&
+          std::abs(normal.dot(box.px[kBoxEdges[e][1]] - contour.a)) < kOwnEdgePx) {
+        return ContourPassage::kNone;
+      }
     }
   }
   if (a_beyond && b_beyond) return ContourPassage::kAcross;
